@@ -1,0 +1,565 @@
+"""The chart solver: Hessian eigenfunctions for triangular mesh parameterization.
+
+This module follows the paper ("Hessian Eigenfunctions for Triangular Mesh Parameterization",
+in ``shared/paper/``), a variant of Hessian LLE (Donoho & Grimes 2003), section by section:
+
+* 3.1 tangent plane at every vertex from the average of its adjacent triangle normals, and local
+  coordinates ``(u, v)`` of its neighbourhood ``N_i`` in that plane (:func:`neighbourhoods`,
+  :func:`tangent_frames`);
+* 3.2 quadratic least-squares interpolation on ``N_i``; its quadratic coefficients ``alpha, beta,
+  gamma`` give the tangent Hessian (eq. 5) and ``C_i = 4 a a^T + 2 b b^T + 4 g g^T`` (eq. 6)
+  (:func:`local_hessians`);
+* 3.3 partition of unity: ``C_i`` is weighted by ``(1/3) sum_j A_ij`` (eq. 8, 9) and scattered into
+  the global ``K`` (:func:`hessian_matrix`);
+* 3.4 the two eigenvectors of ``K`` after the constant one are the coordinates (eq. 3)
+  (:func:`hessian_eigenmap`).
+
+Eigenvectors are only defined up to a 2x2 linear map; :func:`isometric_fit` picks the map that makes
+the chart closest to isometric, and :func:`orient` keeps the input winding (no mirrored chart).
+
+``method="classic-hlle"`` is the Donoho-Grimes estimator (PCA tangent, k nearest neighbours,
+Hessian estimator from a Gram-Schmidt of ``[1, u, v, u^2, uv, v^2]``): the paper's baseline.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+from .errors import InvalidMeshError
+from .linalg import smallest_eigenpairs
+from .mesh import (
+    boundary_edges,
+    check_mesh,
+    connected_components,
+    face_areas,
+    is_edge_manifold,
+    is_vertex_manifold,
+    vertex_adjacency,
+    vertex_normals,
+)
+from .quality import ChartQuality, chart_quality, jacobians, signed_areas
+
+log = logging.getLogger(__name__)
+
+__all__ = [
+    "ChartMap",
+    "HessianSolver",
+    "check_chart",
+    "classic_hlle_matrix",
+    "hessian_eigenmap",
+    "hessian_matrix",
+    "isometric_fit",
+    "local_hessians",
+    "neighbourhoods",
+    "orient",
+    "parameterize_chart",
+    "tangent_frames",
+]
+
+METHODS = ("hessian", "classic-hlle")
+TANGENTS = ("normals", "pca")
+#: A quadratic in (u, v) has 6 coefficients, so a least-squares fit needs at least 6 points.
+MIN_POINTS = 6
+
+
+@dataclass(frozen=True)
+class ChartMap:
+    """A chart's map to the plane.
+
+    Attributes
+    ----------
+    uv : (n, 2) float64 ndarray
+        Row ``i`` belongs to input vertex ``i``; scaled close to isometric (uv units = 3-D units).
+    bijective : bool
+        The map is one-to-one (see :mod:`segparam.quality`).
+    quality : ChartQuality
+        Flip, injectivity and distortion figures.
+    method, tangent : str
+        The options used.
+    eigenvalues : (3,) float64 ndarray
+        The three smallest eigenvalues of ``K`` (the first one belongs to the constant function).
+    timings : dict
+        Seconds spent in ``"assemble"``, ``"eigen"`` and ``"post"``.
+    """
+
+    uv: np.ndarray
+    bijective: bool
+    quality: ChartQuality
+    method: str
+    tangent: str
+    eigenvalues: np.ndarray
+    timings: dict = field(default_factory=dict)
+
+    @property
+    def angle_distortion(self) -> float:
+        return self.quality.angle_distortion
+
+    @property
+    def l2_stretch(self) -> float:
+        return self.quality.l2_stretch
+
+    @property
+    def n_flipped(self) -> int:
+        return self.quality.n_flipped
+
+
+def check_chart(V, F) -> tuple[np.ndarray, np.ndarray]:
+    """Validate a chart for the solver: a connected manifold surface with a boundary.
+
+    Returns
+    -------
+    V : (n, 3) float64 ndarray
+    F : (m, 3) int64 ndarray
+
+    Raises
+    ------
+    InvalidMeshError
+        With the reason: too few vertices, unreferenced vertices, several components,
+        non-manifold, or closed.
+    """
+    V, F = check_mesh(V, F)
+    n = len(V)
+    used = np.bincount(F.ravel(), minlength=n) > 0
+    if n < MIN_POINTS:
+        raise InvalidMeshError(
+            f"chart has {n} vertices; the Hessian solver needs at least {MIN_POINTS}"
+        )
+    if not used.all():
+        raise InvalidMeshError(
+            f"chart has {int((~used).sum())} unreferenced vertices; every vertex needs a face"
+        )
+    count, _ = connected_components(F)
+    if count != 1:
+        raise InvalidMeshError(f"chart has {count} connected components; it must be one piece")
+    if not is_edge_manifold(F):
+        raise InvalidMeshError("chart is not edge-manifold or not consistently oriented")
+    bad = ~is_vertex_manifold(F, n)
+    if bad.any():
+        raise InvalidMeshError(f"chart has {int(bad.sum())} non-manifold vertices")
+    if len(boundary_edges(F)) == 0:
+        raise InvalidMeshError("chart is closed (no boundary); cut it before parameterizing")
+    return V, F
+
+
+# ---------------------------------------------------------------------------------------------
+# 3.1 Neighbourhoods N_i, tangent planes T_x M and local coordinates O_i
+# ---------------------------------------------------------------------------------------------
+
+
+def neighbourhoods(
+    V: np.ndarray, F: np.ndarray, *, min_points: int = MIN_POINTS
+) -> tuple[np.ndarray, np.ndarray]:
+    """The neighbourhood ``N_i`` of every vertex: itself and its 1-ring, minimally extended.
+
+    A vertex whose closed 1-ring has fewer than ``min_points`` points (a boundary corner) gets the
+    nearest vertices of its next ring(s), just enough to reach ``min_points``. Growing every
+    neighbourhood to the 2-ring smooths the Hessian and loses bijectivity on folded charts (see
+    ``DESIGN.md``), so the extension is strictly local.
+
+    Returns
+    -------
+    ptr : (n + 1,) int64 ndarray
+    idx : (nnz,) int64 ndarray
+        ``N_i = idx[ptr[i]:ptr[i + 1]]``, with ``i`` itself first.
+    """
+    n = len(V)
+    A = vertex_adjacency(F, n)
+    deg = np.diff(A.indptr)
+    rows = [np.arange(n), np.repeat(np.arange(n), deg)]
+    cols = [np.arange(n), A.indices.astype(np.int64)]
+    rank = [np.zeros(n), np.ones(len(A.indices))]
+
+    need = min_points - 1 - deg
+    R = np.flatnonzero(need > 0)
+    if len(R):
+        have = np.concatenate([R * n + R, np.repeat(R, deg[R]) * n + A[R].tocoo().col])
+        missing = need[R].copy()
+        reach = A[R]
+        ring = 2
+        while (missing > 0).any():
+            reach = (reach @ A).tocoo()
+            keys = R[reach.row] * n + reach.col
+            new = ~np.isin(keys, have)
+            r, c = reach.row[new], reach.col[new]
+            dist = np.linalg.norm(V[c] - V[R[r]], axis=1)
+            order = np.lexsort((c, dist, r))
+            r, c = r[order], c[order]
+            first = np.searchsorted(r, r)  # position of each row's first candidate
+            take = (np.arange(len(r)) - first) < missing[r]
+            r, c = r[take], c[take]
+            rows.append(R[r])
+            cols.append(c)
+            rank.append(np.full(len(r), ring, dtype=float))
+            have = np.concatenate([have, R[r] * n + c])
+            missing -= np.bincount(r, minlength=len(R))
+            reach = reach.tocsr()
+            ring += 1
+            if ring > n:  # pragma: no cover - a connected chart with >= min_points vertices
+                raise InvalidMeshError(f"cannot find {min_points} points around every vertex")
+    rows_a, cols_a, rank_a = np.concatenate(rows), np.concatenate(cols), np.concatenate(rank)
+    order = np.lexsort((rank_a, rows_a))
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    ptr[1:] = np.cumsum(np.bincount(rows_a, minlength=n))
+    return ptr, cols_a[order]
+
+
+def _groups(ptr: np.ndarray, idx: np.ndarray):
+    """Yield ``(rows, N)`` for each neighbourhood size ``k``: ``N`` is ``(g, k)``, self first."""
+    sizes = np.diff(ptr)
+    for k in np.unique(sizes):
+        rows = np.flatnonzero(sizes == k)
+        yield rows, idx[ptr[rows][:, None] + np.arange(k)]
+
+
+def _pca_normals(V: np.ndarray, ptr: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """Normal of the least-squares plane of each neighbourhood (classic HLLE's tangent)."""
+    normals = np.empty((len(V), 3))
+    for rows, N in _groups(ptr, idx):
+        X = V[N] - V[N].mean(axis=1, keepdims=True)
+        normals[rows] = np.linalg.svd(X, full_matrices=False)[2][:, -1]
+    return normals
+
+
+def tangent_frames(
+    V: np.ndarray,
+    F: np.ndarray,
+    ptr: np.ndarray,
+    idx: np.ndarray,
+    *,
+    tangent: str = "normals",
+) -> tuple[np.ndarray, np.ndarray]:
+    """An orthonormal basis ``[b1, b2]`` of the tangent plane ``T_x M`` at every vertex (sec. 3.1).
+
+    ``tangent="normals"`` (the paper): the plane normal to the average of the adjacent triangle
+    normals. ``tangent="pca"`` (classic HLLE): the least-squares plane of ``N_i``.
+
+    Returns
+    -------
+    b1, b2 : (n, 3) float64 ndarray
+    """
+    if tangent == "normals":
+        normal = vertex_normals(V, F)
+        flat = np.linalg.norm(normal, axis=1) < 0.5  # adjacent normals cancel: fall back to PCA
+        if flat.any():
+            normal[flat] = _pca_normals(V, ptr, idx)[flat]
+    elif tangent == "pca":
+        normal = _pca_normals(V, ptr, idx)
+    else:
+        raise ValueError(f"tangent must be one of {TANGENTS}, got {tangent!r}")
+    helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+    b1 = np.cross(normal, helper)
+    b1 /= np.linalg.norm(b1, axis=1, keepdims=True)
+    b2 = np.cross(normal, b1)
+    return b1, b2
+
+
+# ---------------------------------------------------------------------------------------------
+# 3.2 Tangent Hessian by quadratic interpolation, C_i (eq. 4-6)
+# ---------------------------------------------------------------------------------------------
+
+
+def local_hessians(
+    V: np.ndarray, N: np.ndarray, b1: np.ndarray, b2: np.ndarray
+) -> np.ndarray:
+    """``C_i`` of eq. 6 for a stack of neighbourhoods of one size.
+
+    The interpolation functions ``N_ij(u, v) = alpha_j u^2 + beta_j uv + gamma_j v^2 + ...`` (eq. 4)
+    are fitted in the least-squares sense, and ``alpha_i, beta_i, gamma_i`` are the rows of the map
+    from the values ``f_i`` to the fitted quadratic coefficients. The fit is done in two steps, the
+    linear part ``[u, v, 1]`` first and the quadratic part ``Q = [u^2, uv, v^2]`` on what the linear
+    part leaves (``Pi = I - L L^+``): that is the ordinary least-squares fit when the 6-point design
+    has full rank, and when it does not (collinear boundary points) it still maps every linear
+    function to a zero Hessian, so ``K`` keeps the coordinates in its null space.
+    Coordinates are divided by the neighbourhood's RMS radius ``s`` first (conditioning) and the
+    coefficients scaled back by ``1 / s^2``.
+
+    Parameters
+    ----------
+    V : (n, 3) float ndarray
+    N : (g, k) int ndarray
+        Neighbourhoods, centre vertex first.
+    b1, b2 : (g, 3) float ndarray
+        Tangent bases at the centres.
+
+    Returns
+    -------
+    C : (g, k, k) float64 ndarray
+        ``4 alpha alpha^T + 2 beta beta^T + 4 gamma gamma^T``, so that
+        ``||H^tan f||_F^2 ~ f_i^T C_i f_i`` (eq. 5, 6).
+    """
+    D = V[N] - V[N[:, :1]]
+    u = np.einsum("gkd,gd->gk", D, b1)
+    v = np.einsum("gkd,gd->gk", D, b2)
+    s = np.sqrt((u**2 + v**2).sum(axis=1) / (N.shape[1] - 1))[:, None]
+    u, v = u / s, v / s
+    L = np.stack([u, v, np.ones_like(u)], axis=2)
+    Q = np.stack([u * u, u * v, v * v], axis=2)
+    Pi = np.eye(N.shape[1]) - L @ _pinv(L)
+    coef = _pinv(Pi @ Q) / (s**2)[:, :, None]  # (g, 3, k): rows alpha, beta, gamma
+    a, b, c = coef[:, 0], coef[:, 1], coef[:, 2]
+    return (
+        4 * a[:, :, None] * a[:, None, :]
+        + 2 * b[:, :, None] * b[:, None, :]
+        + 4 * c[:, :, None] * c[:, None, :]
+    )
+
+
+def _pinv(A: np.ndarray, rcond: float = 1e-10) -> np.ndarray:
+    """Batched pseudo-inverse of tall ``(g, k, 3)`` matrices through their 3x3 Gram matrices.
+
+    Much faster than ``np.linalg.pinv`` (an SVD per matrix) on millions of tiny problems; the
+    coordinates are normalized, so the Gram matrices are well scaled.
+    """
+    At = A.transpose(0, 2, 1)
+    lam, U = np.linalg.eigh(At @ A)
+    inv = np.where(lam > rcond * lam[:, -1:], 1.0 / np.where(lam > 0, lam, 1.0), 0.0)
+    return (U * inv[:, None, :]) @ U.transpose(0, 2, 1) @ At
+
+
+# ---------------------------------------------------------------------------------------------
+# 3.3 Partition of unity and assembly of K (eq. 7-9)
+# ---------------------------------------------------------------------------------------------
+
+
+def vertex_weights(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """``int_M phi_i dA = (1/3) sum_j A_ij`` for the hat functions ``phi_i`` of eq. 7 (eq. 8)."""
+    return np.bincount(F.ravel(), weights=np.repeat(face_areas(V, F), 3), minlength=len(V)) / 3
+
+
+def _scatter(n: int, blocks: list[tuple[np.ndarray, np.ndarray]]) -> sp.csr_matrix:
+    """Sum ``(g, k, k)`` blocks at the indices ``(N_i, N_i)`` into one ``n x n`` CSR matrix."""
+    rows, cols, vals = [], [], []
+    for N, W in blocks:
+        k = N.shape[1]
+        rows.append(np.repeat(N, k, axis=1).ravel())
+        cols.append(np.tile(N, (1, k)).ravel())
+        vals.append(W.ravel())
+    K = sp.coo_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
+    ).tocsr()
+    K.sum_duplicates()
+    return K
+
+
+def hessian_matrix(
+    V: np.ndarray,
+    F: np.ndarray,
+    *,
+    tangent: str = "normals",
+    min_points: int = MIN_POINTS,
+) -> sp.csr_matrix:
+    """The global Hessian estimator ``K = sum_i (1/3 sum_j A_ij) C_i`` (eq. 2, 9; sec. 3.4).
+
+    Parameters
+    ----------
+    V : (n, 3) float ndarray
+    F : (m, 3) int ndarray
+    tangent : {"normals", "pca"}
+    min_points : int
+        Smallest neighbourhood (see :func:`neighbourhoods`).
+
+    Returns
+    -------
+    K : (n, n) scipy.sparse.csr_matrix
+        Symmetric positive semi-definite; ``K @ 1 = 0``.
+    """
+    ptr, idx = neighbourhoods(V, F, min_points=min_points)
+    b1, b2 = tangent_frames(V, F, ptr, idx, tangent=tangent)
+    w = vertex_weights(V, F)
+    blocks = []
+    for rows, N in _groups(ptr, idx):
+        C = local_hessians(V, N, b1[rows], b2[rows])
+        blocks.append((N, w[rows][:, None, None] * C))
+    return _scatter(len(V), blocks)
+
+
+def classic_hlle_matrix(V: np.ndarray, *, n_neighbors: int = 12) -> sp.csr_matrix:
+    """Donoho & Grimes' Hessian estimator: the paper's baseline (section 2.1).
+
+    Neighbourhoods are the ``n_neighbors`` nearest points (the vertex included), local coordinates
+    the top two principal directions; the Hessian estimator is the last three columns of the
+    Gram-Schmidt orthonormalization of ``[1, u, v, u^2, uv, v^2]``, ``W_i = H_i H_i^T``.
+
+    Returns
+    -------
+    K : (n, n) scipy.sparse.csr_matrix
+    """
+    k = min(n_neighbors, len(V))
+    if k < MIN_POINTS:
+        raise InvalidMeshError(f"classic HLLE needs at least {MIN_POINTS} neighbours, got {k}")
+    _, N = cKDTree(V).query(V, k=k)
+    X = V[N] - V[N].mean(axis=1, keepdims=True)
+    basis = np.linalg.svd(X, full_matrices=False)[2][:, :2]  # (n, 2, 3)
+    U = np.einsum("nkd,ncd->nkc", X, basis)
+    U = U / np.sqrt((U**2).sum(axis=(1, 2)) / k)[:, None, None]
+    u, v = U[..., 0], U[..., 1]
+    Y = np.stack([np.ones_like(u), u, v, u * u, u * v, v * v], axis=2)
+    Q = np.linalg.qr(Y)[0][:, :, 3:]  # (n, k, 3)
+    return _scatter(len(V), [(N, Q @ Q.transpose(0, 2, 1))])
+
+
+# ---------------------------------------------------------------------------------------------
+# 3.4 Eigenvectors of K, then the 2x2 map and the orientation
+# ---------------------------------------------------------------------------------------------
+
+
+def hessian_eigenmap(K: sp.spmatrix, *, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Two orthonormal coordinate functions ``h1, h2 ⟂ 1`` from the near-null space of ``K`` (eq. 3).
+
+    The near-null space is 3-dimensional (the constant and two coordinates) and nearly degenerate,
+    so the three smallest eigenvectors are taken together, the constant is projected out and the
+    remaining 2-D span is orthonormalized.
+
+    Returns
+    -------
+    Y : (n, 2) float64 ndarray
+    values : (3,) float64 ndarray
+    """
+    values, vectors = smallest_eigenpairs(K, 3, seed=seed)
+    X = vectors - vectors.mean(axis=0)
+    U = np.linalg.svd(X, full_matrices=False)[0][:, :2]
+    return U, values
+
+
+def isometric_fit(V: np.ndarray, F: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """The linear map ``uv = Y A`` that makes the chart closest to isometric.
+
+    With ``G_t`` the Jacobian of triangle ``t`` into ``Y``, the map's metric is
+    ``G_t^T M G_t`` with ``M = A A^T``; ``M`` minimizes ``sum_t A_t ||G_t^T M G_t - I||_F^2``, a linear
+    least-squares problem in its three entries; ``A = M^{1/2}``.
+
+    Returns
+    -------
+    uv : (n, 2) float64 ndarray
+    """
+    G = jacobians(V, F, Y)
+    r1, r2 = G[:, 0, :], G[:, 1, :]  # rows of G_t
+
+    def sym(p, q):  # entries (xx, yy, sqrt2 xy) of p q^T + q p^T, / 2
+        return np.stack([p[:, 0] * q[:, 0], p[:, 1] * q[:, 1], np.sqrt(0.5) * (
+            p[:, 0] * q[:, 1] + p[:, 1] * q[:, 0])], axis=1)
+
+    design = np.stack([sym(r1, r1), 2 * sym(r1, r2), sym(r2, r2)], axis=2)  # (m, 3, 3)
+    target = np.array([1.0, 1.0, 0.0])
+    w = face_areas(V, F)
+    lhs = np.einsum("m,mij,mik->jk", w, design, design)
+    rhs = np.einsum("m,mij,i->j", w, design, target)
+    m11, m12, m22 = np.linalg.solve(lhs, rhs)
+    vals, vecs = np.linalg.eigh(np.array([[m11, m12], [m12, m22]]))
+    vals = np.maximum(vals, 1e-12 * max(vals.max(), 1e-300))
+    A = (vecs * np.sqrt(vals)) @ vecs.T
+    return Y @ A
+
+
+def orient(uv: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Mirror ``uv`` if most of its area has the opposite winding of the input (no mirrored chart)."""
+    if signed_areas(uv, F).sum() < 0:
+        uv = uv * np.array([-1.0, 1.0])
+    return uv
+
+
+class HessianSolver:
+    """Keeps a chart's Hessian matrix ``K`` so it can be inspected or solved again.
+
+    Examples
+    --------
+    >>> solver = HessianSolver(V, F)          # doctest: +SKIP
+    >>> chart = solver.solve(seed=0)          # doctest: +SKIP
+    """
+
+    def __init__(
+        self,
+        V,
+        F,
+        *,
+        method: str = "hessian",
+        tangent: str = "normals",
+        min_points: int = MIN_POINTS,
+        n_neighbors: int = 12,
+    ) -> None:
+        if method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        if tangent not in TANGENTS:
+            raise ValueError(f"tangent must be one of {TANGENTS}, got {tangent!r}")
+        self.V, self.F = check_chart(V, F)
+        self.method, self.tangent = method, tangent
+        t0 = time.perf_counter()
+        if method == "hessian":
+            self.K = hessian_matrix(self.V, self.F, tangent=tangent, min_points=min_points)
+        else:
+            self.K = classic_hlle_matrix(self.V, n_neighbors=n_neighbors)
+        self.assemble_seconds = time.perf_counter() - t0
+
+    def solve(self, *, seed: int = 0) -> ChartMap:
+        """Eigenvectors of ``K``, isometric 2x2 fit, orientation, quality."""
+        t0 = time.perf_counter()
+        Y, values = hessian_eigenmap(self.K, seed=seed)
+        t1 = time.perf_counter()
+        uv = orient(isometric_fit(self.V, self.F, Y), self.F)
+        uv = uv - uv.min(axis=0)
+        quality = chart_quality(self.V, self.F, uv)
+        t2 = time.perf_counter()
+        return ChartMap(
+            uv=uv,
+            bijective=quality.bijective,
+            quality=quality,
+            method=self.method,
+            tangent=self.tangent if self.method == "hessian" else "pca",
+            eigenvalues=values,
+            timings={"assemble": self.assemble_seconds, "eigen": t1 - t0, "post": t2 - t1},
+        )
+
+
+def parameterize_chart(
+    V,
+    F,
+    *,
+    method: str = "hessian",
+    tangent: str = "normals",
+    seed: int = 0,
+    min_points: int = MIN_POINTS,
+    n_neighbors: int = 12,
+) -> ChartMap:
+    """Map one disk-like chart to the plane with the Hessian-eigenfunction solver.
+
+    Parameters
+    ----------
+    V : (n, 3) array_like of float
+    F : (m, 3) array_like of int
+        A connected, manifold chart with at least one boundary loop and every vertex in a face.
+    method : {"hessian", "classic-hlle"}
+        The paper's solver, or Donoho & Grimes' classic HLLE (the paper's baseline).
+    tangent : {"normals", "pca"}
+        Tangent planes from averaged triangle normals (paper, sec. 3.1) or PCA (``"hessian"`` only).
+    seed : int
+        Seeds the sparse eigen-solver's start vector.
+    min_points : int
+        Smallest neighbourhood for the quadratic fit (``"hessian"``).
+    n_neighbors : int
+        Neighbourhood size of ``"classic-hlle"``.
+
+    Returns
+    -------
+    ChartMap
+
+    Raises
+    ------
+    InvalidMeshError
+        If the chart cannot be parameterized (closed, several components, non-manifold, fewer
+        than 6 vertices, ...), with the reason.
+
+    References
+    ----------
+    Hessian Eigenfunctions for Triangular Mesh Parameterization, sections 3.1-3.4, eq. 2-9.
+    D. L. Donoho, C. Grimes, Hessian eigenmaps, PNAS 100(10), 2003.
+    """
+    solver = HessianSolver(
+        V, F, method=method, tangent=tangent, min_points=min_points, n_neighbors=n_neighbors
+    )
+    return solver.solve(seed=seed)
