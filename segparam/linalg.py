@@ -31,9 +31,10 @@ def smallest_eigenpairs(
     Small problems use dense ``scipy.linalg.eigh``. Large ones use block inverse (subspace)
     iteration with Rayleigh-Ritz on a sparse LU factorization of ``K - sigma I``: the wanted
     eigenvalues sit at the bottom of a spectrum whose scale grows like ``n^2`` (``K`` discretizes a
-    fourth-order operator), so ``sigma`` is set just below zero at ``-1e-3 mean(diag K) / n^2`` and a
-    block of ``k + 4`` vectors converges in one or two solves. (ARPACK's shift-invert mode with the
-    same factorization needs several times more solves on these nearly degenerate null spaces.)
+    fourth-order operator), so ``sigma`` is set just below zero, at ``-1e-3 mean(diag K) / n^2``,
+    and a block of ``k + 4`` vectors converges in one or two solves. (ARPACK's shift-invert mode
+    with the same factorization needs several times more solves on these nearly degenerate null
+    spaces.)
 
     Parameters
     ----------

@@ -279,7 +279,7 @@ def is_vertex_manifold(F: np.ndarray, n_vertices: int | None = None) -> np.ndarr
 
 
 def vertex_adjacency(F: np.ndarray, n_vertices: int) -> sp.csr_matrix:
-    """Symmetric vertex adjacency matrix (1 where an edge joins two vertices), CSR, sorted indices."""
+    """Symmetric vertex adjacency matrix (1 where an edge joins two vertices), sorted CSR."""
     E, _ = edges(F)
     data = np.ones(2 * len(E))
     A = sp.csr_matrix(

@@ -66,6 +66,10 @@ METHODS = ("hessian", "classic-hlle")
 TANGENTS = ("normals", "pca")
 #: A quadratic in (u, v) has 6 coefficients, so a least-squares fit needs at least 6 points.
 MIN_POINTS = 6
+#: Worst accepted conditioning of a local quadratic fit (see :func:`hessian_matrix`).
+MIN_RCOND = 0.01
+#: Most points added to one neighbourhood for conditioning.
+MAX_EXTEND = 6
 
 
 @dataclass(frozen=True)
@@ -153,14 +157,26 @@ def check_chart(V, F) -> tuple[np.ndarray, np.ndarray]:
 
 
 def neighbourhoods(
-    V: np.ndarray, F: np.ndarray, *, min_points: int = MIN_POINTS
+    V: np.ndarray,
+    F: np.ndarray,
+    *,
+    min_points: int = MIN_POINTS,
+    extra: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The neighbourhood ``N_i`` of every vertex: itself and its 1-ring, minimally extended.
 
-    A vertex whose closed 1-ring has fewer than ``min_points`` points (a boundary corner) gets the
-    nearest vertices of its next ring(s), just enough to reach ``min_points``. Growing every
-    neighbourhood to the 2-ring smooths the Hessian and loses bijectivity on folded charts (see
-    ``DESIGN.md``), so the extension is strictly local.
+    A vertex whose closed 1-ring has fewer than ``min_points`` points (a boundary vertex) gets the
+    nearest vertices of its next ring(s), just enough to reach ``min_points``, plus ``extra[i]``
+    more. Growing every neighbourhood to the 2-ring smooths the Hessian and loses bijectivity on
+    folded charts (see ``DESIGN.md``), so the extension is strictly local.
+
+    Parameters
+    ----------
+    V : (n, 3) float ndarray
+    F : (m, 3) int ndarray
+    min_points : int
+    extra : (n,) int ndarray, optional
+        Points to add beyond ``max(min_points, 1-ring size)`` (see :func:`hessian_matrix`).
 
     Returns
     -------
@@ -175,7 +191,9 @@ def neighbourhoods(
     cols = [np.arange(n), A.indices.astype(np.int64)]
     rank = [np.zeros(n), np.ones(len(A.indices))]
 
-    need = min_points - 1 - deg
+    need = np.maximum(min_points - 1 - deg, 0)
+    if extra is not None:
+        need = need + extra
     R = np.flatnonzero(need > 0)
     if len(R):
         have = np.concatenate([R * n + R, np.repeat(R, deg[R]) * n + A[R].tocoo().col])
@@ -215,6 +233,34 @@ def _groups(ptr: np.ndarray, idx: np.ndarray):
     for k in np.unique(sizes):
         rows = np.flatnonzero(sizes == k)
         yield rows, idx[ptr[rows][:, None] + np.arange(k)]
+
+
+def _design(V, N, b1, b2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Local coordinates ``(u, v)`` of ``N`` in the tangent planes, divided by their RMS radius."""
+    D = V[N] - V[N[:, :1]]
+    u = np.einsum("gkd,gd->gk", D, b1)
+    v = np.einsum("gkd,gd->gk", D, b2)
+    s = np.sqrt((u**2 + v**2).sum(axis=1) / (N.shape[1] - 1))[:, None]
+    return u / s, v / s, s
+
+
+def fit_conditioning(
+    V: np.ndarray, ptr: np.ndarray, idx: np.ndarray, b1: np.ndarray, b2: np.ndarray
+) -> np.ndarray:
+    """Reciprocal condition number of every vertex's quadratic fit (sec. 3.2).
+
+    Returns
+    -------
+    (n,) float64 ndarray
+        ``sigma_min / sigma_max`` of the normalized design ``[u^2, uv, v^2, u, v, 1]``.
+    """
+    out = np.empty(len(V))
+    for rows, N in _groups(ptr, idx):
+        u, v, _ = _design(V, N, b1[rows], b2[rows])
+        P = np.stack([u * u, u * v, v * v, u, v, np.ones_like(u)], axis=2)
+        lam = np.linalg.eigvalsh(P.transpose(0, 2, 1) @ P)
+        out[rows] = np.sqrt(np.maximum(lam[:, 0], 0) / lam[:, -1])
+    return out
 
 
 def _pca_normals(V: np.ndarray, ptr: np.ndarray, idx: np.ndarray) -> np.ndarray:
@@ -264,9 +310,7 @@ def tangent_frames(
 # ---------------------------------------------------------------------------------------------
 
 
-def local_hessians(
-    V: np.ndarray, N: np.ndarray, b1: np.ndarray, b2: np.ndarray
-) -> np.ndarray:
+def local_hessians(V: np.ndarray, N: np.ndarray, b1: np.ndarray, b2: np.ndarray) -> np.ndarray:
     """``C_i`` of eq. 6 for a stack of neighbourhoods of one size.
 
     The interpolation functions ``N_ij(u, v) = alpha_j u^2 + beta_j uv + gamma_j v^2 + ...`` (eq. 4)
@@ -293,11 +337,7 @@ def local_hessians(
         ``4 alpha alpha^T + 2 beta beta^T + 4 gamma gamma^T``, so that
         ``||H^tan f||_F^2 ~ f_i^T C_i f_i`` (eq. 5, 6).
     """
-    D = V[N] - V[N[:, :1]]
-    u = np.einsum("gkd,gd->gk", D, b1)
-    v = np.einsum("gkd,gd->gk", D, b2)
-    s = np.sqrt((u**2 + v**2).sum(axis=1) / (N.shape[1] - 1))[:, None]
-    u, v = u / s, v / s
+    u, v, s = _design(V, N, b1, b2)
     L = np.stack([u, v, np.ones_like(u)], axis=2)
     Q = np.stack([u * u, u * v, v * v], axis=2)
     Pi = np.eye(N.shape[1]) - L @ _pinv(L)
@@ -353,6 +393,7 @@ def hessian_matrix(
     *,
     tangent: str = "normals",
     min_points: int = MIN_POINTS,
+    min_rcond: float = MIN_RCOND,
 ) -> sp.csr_matrix:
     """The global Hessian estimator ``K = sum_i (1/3 sum_j A_ij) C_i`` (eq. 2, 9; sec. 3.4).
 
@@ -363,14 +404,26 @@ def hessian_matrix(
     tangent : {"normals", "pca"}
     min_points : int
         Smallest neighbourhood (see :func:`neighbourhoods`).
+    min_rcond : float
+        A neighbourhood whose quadratic fit is worse conditioned than this (smallest over largest
+        singular value of the normalized design ``[u^2, uv, v^2, u, v, 1]``) gets its next-nearest
+        point, one at a time, up to ``MAX_EXTEND`` points. This is what keeps boundary vertices
+        (whose few neighbours are nearly collinear) from blowing up ``K``; interior vertices of a
+        regular mesh score 0.13-0.18 and are never extended.
 
     Returns
     -------
     K : (n, n) scipy.sparse.csr_matrix
         Symmetric positive semi-definite; ``K @ 1 = 0``.
     """
-    ptr, idx = neighbourhoods(V, F, min_points=min_points)
-    b1, b2 = tangent_frames(V, F, ptr, idx, tangent=tangent)
+    extra = np.zeros(len(V), dtype=np.int64)
+    for _ in range(MAX_EXTEND + 1):
+        ptr, idx = neighbourhoods(V, F, min_points=min_points, extra=extra)
+        b1, b2 = tangent_frames(V, F, ptr, idx, tangent=tangent)
+        bad = fit_conditioning(V, ptr, idx, b1, b2) < min_rcond
+        if not bad.any():
+            break
+        extra[bad] += 1
     w = vertex_weights(V, F)
     blocks = []
     for rows, N in _groups(ptr, idx):
@@ -410,7 +463,7 @@ def classic_hlle_matrix(V: np.ndarray, *, n_neighbors: int = 12) -> sp.csr_matri
 
 
 def hessian_eigenmap(K: sp.spmatrix, *, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Two orthonormal coordinate functions ``h1, h2 ⟂ 1`` from the near-null space of ``K`` (eq. 3).
+    """Coordinates ``h1, h2`` (orthonormal, orthogonal to 1) from the near-null space of K (eq. 3).
 
     The near-null space is 3-dimensional (the constant and two coordinates) and nearly degenerate,
     so the three smallest eigenvectors are taken together, the constant is projected out and the
@@ -431,8 +484,8 @@ def isometric_fit(V: np.ndarray, F: np.ndarray, Y: np.ndarray) -> np.ndarray:
     """The linear map ``uv = Y A`` that makes the chart closest to isometric.
 
     With ``G_t`` the Jacobian of triangle ``t`` into ``Y``, the map's metric is
-    ``G_t^T M G_t`` with ``M = A A^T``; ``M`` minimizes ``sum_t A_t ||G_t^T M G_t - I||_F^2``, a linear
-    least-squares problem in its three entries; ``A = M^{1/2}``.
+    ``G_t^T M G_t`` with ``M = A A^T``; ``M`` minimizes ``sum_t A_t ||G_t^T M G_t - I||_F^2``, a
+    linear least-squares problem in its three entries; ``A = M^{1/2}``.
 
     Returns
     -------
@@ -442,8 +495,14 @@ def isometric_fit(V: np.ndarray, F: np.ndarray, Y: np.ndarray) -> np.ndarray:
     r1, r2 = G[:, 0, :], G[:, 1, :]  # rows of G_t
 
     def sym(p, q):  # entries (xx, yy, sqrt2 xy) of p q^T + q p^T, / 2
-        return np.stack([p[:, 0] * q[:, 0], p[:, 1] * q[:, 1], np.sqrt(0.5) * (
-            p[:, 0] * q[:, 1] + p[:, 1] * q[:, 0])], axis=1)
+        return np.stack(
+            [
+                p[:, 0] * q[:, 0],
+                p[:, 1] * q[:, 1],
+                np.sqrt(0.5) * (p[:, 0] * q[:, 1] + p[:, 1] * q[:, 0]),
+            ],
+            axis=1,
+        )
 
     design = np.stack([sym(r1, r1), 2 * sym(r1, r2), sym(r2, r2)], axis=2)  # (m, 3, 3)
     target = np.array([1.0, 1.0, 0.0])
@@ -458,7 +517,7 @@ def isometric_fit(V: np.ndarray, F: np.ndarray, Y: np.ndarray) -> np.ndarray:
 
 
 def orient(uv: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Mirror ``uv`` if most of its area has the opposite winding of the input (no mirrored chart)."""
+    """Mirror ``uv`` if most of its area has the input's opposite winding (no mirrored chart)."""
     if signed_areas(uv, F).sum() < 0:
         uv = uv * np.array([-1.0, 1.0])
     return uv

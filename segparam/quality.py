@@ -12,8 +12,8 @@ winding numbers of the uv boundary loops around it; the loop checks make that su
 three checks together prove the map one-to-one.
 
 Distortion follows Sander et al. 2001 and the usual definitions, from the singular values
-``s1 >= s2`` of each triangle's Jacobian (surface -> uv) after the uv are scaled so that the total uv
-area equals the total 3-D area, weighted by 3-D triangle area.
+``s1 >= s2`` of each triangle's Jacobian (surface -> uv) after the uv are scaled so that the total
+uv area equals the total 3-D area, weighted by 3-D triangle area.
 """
 
 from __future__ import annotations

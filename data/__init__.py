@@ -1,0 +1,1 @@
+"""Sample meshes shipped with segparam (see README.md in this folder)."""

@@ -1,0 +1,23 @@
+"""Regenerate the sample meshes in this folder: ``python data/generate.py``.
+
+Deterministic: the same segparam version writes the same bytes.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from segparam.io import write_obj
+from segparam.synthetic import brain_like_parcels
+
+HERE = Path(__file__).resolve().parent
+
+
+def main() -> None:
+    parcels = brain_like_parcels(12, mean_faces=1500, min_faces=1000, max_faces=2500, seed=7)
+    V, F = max(parcels, key=lambda p: len(p[1]))
+    write_obj(HERE / "brain_parcel.obj", V, F)
+
+
+if __name__ == "__main__":
+    main()

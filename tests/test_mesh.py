@@ -1,0 +1,131 @@
+import numpy as np
+import pytest
+from meshes import spherical_cap, tri_grid
+
+from segparam import mesh
+from segparam.errors import InvalidMeshError
+
+
+def tetrahedron():
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    return V, F
+
+
+def torus(n=16, m=8, R=2.0, r=0.7):
+    i, j = np.meshgrid(np.arange(n), np.arange(m), indexing="ij")
+    u, v = 2 * np.pi * i / n, 2 * np.pi * j / m
+    V = np.stack(
+        [(R + r * np.cos(v)) * np.cos(u), (R + r * np.cos(v)) * np.sin(u), r * np.sin(v)], -1
+    ).reshape(-1, 3)
+    idx = np.arange(n * m).reshape(n, m)
+    a, b = idx, np.roll(idx, -1, 0)
+    c, d = np.roll(b, -1, 1), np.roll(idx, -1, 1)
+    F = np.concatenate(
+        [np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)]
+    )
+    return V, F
+
+
+def annulus(n=24, rings=4):
+    i, j = np.meshgrid(np.arange(n), np.arange(rings), indexing="ij")
+    th, r = 2 * np.pi * i / n, 1 + j / (rings - 1)
+    V = np.stack([r * np.cos(th), r * np.sin(th), 0 * r], -1).reshape(-1, 3)
+    idx = np.arange(n * rings).reshape(n, rings)
+    a, b = idx[:, :-1], np.roll(idx, -1, 0)[:, :-1]
+    c, d = np.roll(idx, -1, 0)[:, 1:], idx[:, 1:]
+    # (a, c, b) runs counter-clockwise seen from +z.
+    F = np.concatenate(
+        [np.stack([a, c, b], -1).reshape(-1, 3), np.stack([a, d, c], -1).reshape(-1, 3)]
+    )
+    return V, F
+
+
+@pytest.mark.parametrize(
+    "V, F, message",
+    [
+        (np.zeros((4, 2)), [[0, 1, 2]], "shape"),
+        (np.zeros((4, 3)), np.zeros((0, 3), int), "no faces"),
+        ([[0, 0, 0], [1, 0, 0], [np.nan, 1, 0]], [[0, 1, 2]], "NaN"),
+        ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 3]], r"span \[0, 3\]"),
+        ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 1]], "repeat a vertex"),
+        ([[0, 0, 0], [1, 0, 0], [2, 0, 0]], [[0, 1, 2]], "zero area"),
+        ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2.5]], "integers"),
+    ],
+)
+def test_check_mesh_rejects_bad_input(V, F, message):
+    with pytest.raises(InvalidMeshError, match=message):
+        mesh.check_mesh(V, F)
+
+
+def test_check_mesh_returns_canonical_dtypes():
+    V, F = mesh.check_mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+    assert V.dtype == np.float64 and F.dtype == np.int64
+
+
+def test_grid_counts_and_topology():
+    V, F = tri_grid(6, 5)
+    E, _ = mesh.edges(F)
+    loops = mesh.boundary_loops(F)
+    assert len(loops) == 1 and len(loops[0]) == 2 * (6 + 5) - 4
+    assert len(V) - len(E) + len(F) == mesh.euler_characteristic(F) == 1
+    assert mesh.genus(F) == 0
+    assert mesh.is_edge_manifold(F) and mesh.is_vertex_manifold(F).all()
+
+
+def test_boundary_loops_are_ordered_and_follow_winding():
+    V, F = annulus()
+    loops = mesh.boundary_loops(F)
+    assert len(loops) == 2 and mesh.genus(F) == 0
+    E = {tuple(e) for e in mesh.boundary_edges(F)}
+    for loop in loops:
+        assert all((a, b) in E for a, b in zip(loop, np.roll(loop, -1), strict=True))
+    # The outer loop of a counter-clockwise annulus runs counter-clockwise, the inner one clockwise.
+    assert (np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])[:, 2] > 0).all()
+    P = [(V[lp, :2], V[np.roll(lp, -1), :2]) for lp in loops]
+    area = [(p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]).sum() / 2 for p, q in P]
+    radius = [np.linalg.norm(V[lp[0], :2]) for lp in loops]
+    assert (
+        np.sign(area[int(np.argmax(radius))]) == 1 and np.sign(area[int(np.argmin(radius))]) == -1
+    )
+
+
+def test_closed_surfaces_genus():
+    assert mesh.genus(tetrahedron()[1]) == 0
+    assert mesh.genus(torus()[1]) == 1
+    assert mesh.boundary_loops(torus()[1]) == []
+
+
+def test_components():
+    V, F = tri_grid(4, 4)
+    F2 = np.concatenate([F, F + len(V)])
+    count, labels = mesh.connected_components(F2)
+    assert count == 2 and (labels[: len(F)] == labels[0]).all() and labels[-1] != labels[0]
+
+
+def test_bowtie_vertex_is_not_manifold():
+    F = np.array([[0, 1, 2], [0, 3, 4]])
+    manifold = mesh.is_vertex_manifold(F)
+    assert not manifold[0] and manifold[1:].all()
+
+
+def test_non_manifold_edge():
+    F = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
+    assert not mesh.is_edge_manifold(F)
+
+
+def test_gauss_bonnet_angle_defect():
+    # Sum of angle defects (boundary turning angles included) is 2 pi chi.
+    for V, F in [tetrahedron(), torus(), spherical_cap(), tri_grid(5, 5)]:
+        total = mesh.angle_defect(V, F).sum()
+        assert total == pytest.approx(2 * np.pi * mesh.euler_characteristic(F), abs=1e-9)
+
+
+def test_normals_and_areas():
+    V, F = tri_grid(5, 5)
+    assert mesh.face_areas(np.eye(3), np.array([[0, 1, 2]]))[0] == pytest.approx(np.sqrt(3) / 2)
+    assert np.allclose(mesh.face_normals(V, F), [0, 0, 1])
+    assert np.allclose(mesh.vertex_normals(V, F), [0, 0, 1])
+    Vt, Ft = tetrahedron()
+    centroid_dir = Vt[Ft].mean(1) - Vt.mean(0)
+    assert (np.einsum("ij,ij->i", mesh.face_normals(Vt, Ft), centroid_dir) > 0).all()

@@ -1,0 +1,180 @@
+import numpy as np
+import pytest
+from meshes import (
+    cone_patch,
+    cylinder_patch,
+    folded_strip,
+    procrustes_residual,
+    rigid,
+    saddle,
+    spherical_cap,
+    tri_grid,
+)
+
+from segparam.errors import InvalidMeshError
+from segparam.mesh import edges, face_areas
+from segparam.parameterize import (
+    HessianSolver,
+    hessian_matrix,
+    local_hessians,
+    neighbourhoods,
+    parameterize_chart,
+    vertex_weights,
+)
+
+
+def test_plane_is_isometric_up_to_rigid_motion():
+    V, F = tri_grid(15, 15)
+    chart = parameterize_chart(V, F)
+    assert chart.bijective
+    assert chart.uv.shape == (len(V), 2) and chart.uv.dtype == np.float64
+    assert procrustes_residual(chart.uv, V[:, :2]) < 1e-8
+    assert chart.quality.angle_distortion == pytest.approx(1, abs=1e-6)
+
+
+def test_large_plane_goes_through_the_sparse_solver():
+    V, F = tri_grid(30, 30)  # 900 vertices: above the dense limit
+    chart = parameterize_chart(rigid(V, seed=3), F)
+    assert chart.bijective and procrustes_residual(chart.uv, V[:, :2]) < 1e-6
+
+
+@pytest.mark.parametrize("shape", [cylinder_patch, cone_patch])
+def test_developable_patches_unroll_with_low_distortion(shape):
+    V, F = shape()
+    chart = parameterize_chart(V, F)
+    assert chart.bijective
+    assert chart.quality.angle_distortion < 1.01
+    assert chart.quality.l2_stretch < 1.01
+
+
+@pytest.mark.parametrize("shape, bound", [(spherical_cap, 1.1), (saddle, 1.1)])
+def test_doubly_curved_patches_are_bijective_with_low_distortion(shape, bound):
+    V, F = shape()
+    chart = parameterize_chart(V, F)
+    assert chart.bijective and chart.quality.angle_distortion < bound
+
+
+def test_folded_strip_unfolds():
+    V, F = folded_strip()
+    chart = parameterize_chart(V, F)
+    assert chart.bijective and chart.quality.angle_distortion < 1.02
+
+
+def test_classic_hlle_is_worse_on_a_folded_strip():
+    V, F = folded_strip()
+    ours = parameterize_chart(V, F)
+    classic = parameterize_chart(V, F, method="classic-hlle")
+    assert ours.bijective and not classic.bijective
+    assert classic.quality.n_flipped > 10 * max(ours.quality.n_flipped, 1)
+
+
+def test_pca_tangent_option_runs_and_is_recorded():
+    V, F = saddle()
+    chart = parameterize_chart(V, F, tangent="pca")
+    assert chart.tangent == "pca" and chart.bijective
+
+
+def test_eq6_local_hessian_on_exact_quadratics():
+    # Seven points in the plane; quadratics are fitted exactly, so f^T C f = ||Hess f||_F^2.
+    th = np.linspace(0, 2 * np.pi, 7)[:-1]
+    P = np.vstack([[0, 0], np.stack([np.cos(th), np.sin(th)], 1) * 0.3])
+    V = np.c_[P, np.zeros(7)]
+    N = np.arange(7)[None]
+    C = local_hessians(V, N, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))[0]
+    u, v = P[:, 0], P[:, 1]
+    cases = {
+        "u^2": (u**2, 4.0),  # Hessian [[2, 0], [0, 0]]
+        "uv": (u * v, 2.0),  # [[0, 1], [1, 0]]
+        "v^2": (v**2, 4.0),
+        "3u^2 - 2uv": (3 * u**2 - 2 * u * v, 36.0 + 2 * 4.0),
+        "linear": (2 * u - v + 1, 0.0),
+    }
+    for name, (f, expected) in cases.items():
+        assert f @ C @ f == pytest.approx(expected, abs=1e-9), name
+    assert np.allclose(C, C.T)
+
+
+def test_eq8_9_partition_of_unity_and_assembly():
+    V, F = tri_grid(12, 10)
+    w = vertex_weights(V, F)
+    assert w.sum() == pytest.approx(face_areas(V, F).sum())  # phi_i sum to one (eq. 7, 8)
+    K = hessian_matrix(V, F)
+    assert abs(K - K.T).max() < 1e-9 * abs(K).max()
+    one = np.ones(len(V))
+    assert np.abs(K @ one).max() < 1e-9 * abs(K).max()
+    x, y = V[:, 0], V[:, 1]
+    assert abs(x @ K @ x) < 1e-9 * abs(K).max()  # linear functions: zero Hessian
+    # f = x^2 has ||Hess||_F^2 = 4 everywhere, so f^T K f = sum_i w_i * 4 = 4 * area (eq. 9).
+    f = x**2 + 0.5 * y
+    assert f @ K @ f == pytest.approx(4 * face_areas(V, F).sum(), rel=1e-9)
+
+
+def test_neighbourhoods_are_one_rings_with_minimal_extension():
+    V, F = tri_grid(8, 8)
+    ptr, idx = neighbourhoods(V, F)
+    sizes = np.diff(ptr)
+    E, _ = edges(F)
+    degree = np.bincount(E.ravel(), minlength=len(V))
+    assert (idx[ptr[:-1]] == np.arange(len(V))).all()  # the vertex itself first
+    assert (sizes == np.maximum(degree + 1, 6)).all()
+    for i in range(len(V)):
+        N = idx[ptr[i] : ptr[i + 1]]
+        assert len(set(N.tolist())) == len(N)
+
+
+def test_invariant_under_rigid_motion_and_uniform_scale():
+    V, F = spherical_cap(15, 15)
+    base = parameterize_chart(V, F)
+    for seed, scale in [(1, 1.0), (2, 1e3), (3, 1e-3)]:
+        moved = parameterize_chart(rigid(V, seed=seed, scale=scale), F)
+        assert moved.bijective
+        assert procrustes_residual(moved.uv / scale, base.uv) < 1e-6 * np.ptp(base.uv)
+        assert moved.quality.angle_distortion == pytest.approx(base.quality.angle_distortion)
+
+
+def test_orientation_keeps_the_input_winding():
+    V, F = saddle(12, 12)
+    a = parameterize_chart(V, F)
+    b = parameterize_chart(V, F[:, ::-1])  # reversed winding: the chart must not be mirrored
+    assert a.bijective and b.bijective and a.quality.n_flipped == b.quality.n_flipped == 0
+
+
+def test_deterministic_for_a_seed():
+    V, F = saddle(30, 30)
+    a = parameterize_chart(V, F, seed=5)
+    b = HessianSolver(V, F).solve(seed=5)
+    assert np.array_equal(a.uv, b.uv)
+
+
+def tetra():
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    return V, np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+
+
+def octahedron():
+    V = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+    F = np.array(
+        [[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]]
+    )
+    return V, F
+
+
+def test_bad_charts_raise_with_the_reason():
+    V, F = tri_grid(5, 5)
+    with pytest.raises(InvalidMeshError, match="closed"):
+        parameterize_chart(*octahedron())
+    with pytest.raises(InvalidMeshError, match="at least 6"):
+        parameterize_chart(*tetra())
+    with pytest.raises(InvalidMeshError, match="2 connected components"):
+        parameterize_chart(np.vstack([V, V + 5]), np.vstack([F, F + len(V)]))
+    with pytest.raises(InvalidMeshError, match="unreferenced"):
+        parameterize_chart(np.vstack([V, [[9, 9, 9]]]), F)
+    with pytest.raises(InvalidMeshError, match="manifold"):
+        Vb = np.vstack([V, V[[0, 1, 5]] + [0, 0, 1]])
+        Fb = np.vstack([F, [[0, 1, len(V) + 2]]])  # a third face on a boundary edge... then a fin
+        Fb = np.vstack([Fb, [[1, 0, len(V) + 1]], [[0, 1, len(V)]]])
+        parameterize_chart(Vb, Fb)
+    with pytest.raises(InvalidMeshError):
+        parameterize_chart(V[:, :2], F)
+    with pytest.raises(ValueError, match="method"):
+        parameterize_chart(V, F, method="lscm")
