@@ -87,3 +87,37 @@ def procrustes_residual(X, Y):
     D = np.diag([1.0, np.sign(np.linalg.det(U @ Vt))])
     R = U @ D @ Vt
     return float(np.sqrt(((X @ R - Y) ** 2).sum(1).mean()))
+
+
+def plate_with_holes(nx=24, ny=12, *, holes=((5, 9, 4, 8), (15, 19, 4, 8)), thickness=0.3):
+    """A CAD-like closed part: a rectangular plate with square through-holes (genus = #holes).
+
+    Sharp 90-degree edges all round. ``holes`` are cell ranges (x0, x1, y0, y1) removed from the
+    plate's nx-by-ny cell grid.
+    """
+    from segparam.mesh import boundary_edges
+
+    i, j = np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), indexing="ij")
+    P = np.stack([i.ravel(), j.ravel()], 1).astype(float) / nx * 4
+    ci, cj = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+    keep = np.ones((nx, ny), bool)
+    for x0, x1, y0, y1 in holes:
+        keep[x0:x1, y0:y1] = False
+    ci, cj = ci[keep], cj[keep]
+    a = ci * (ny + 1) + cj
+    b, c, d = a + (ny + 1), a + (ny + 1) + 1, a + 1
+    top = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    used, top = np.unique(top, return_inverse=True)
+    top = top.reshape(-1, 3)
+    P = P[used]
+    n = len(P)
+    V = np.vstack([np.c_[P, np.full(n, thickness)], np.c_[P, np.zeros(n)]])
+    bottom = top[:, ::-1] + n
+    B = boundary_edges(top)  # directed along the top's winding
+    walls = np.concatenate(
+        [
+            np.stack([B[:, 1], B[:, 0], B[:, 0] + n], 1),
+            np.stack([B[:, 1], B[:, 0] + n, B[:, 1] + n], 1),
+        ]
+    )
+    return V, np.concatenate([top, bottom, walls]).astype(np.int64)

@@ -1,0 +1,380 @@
+"""Segment a mesh into charts by spectral clustering of its face graph.
+
+Faces are nodes; two faces sharing an edge are joined with an affinity that falls with the angle
+between their normals (concave creases cost more than convex ones, the "minima rule") and grows with
+the length of the shared edge, so the normalized cut prefers short cuts along creases and high
+curvature. The number of charts follows the mesh's integrated absolute Gaussian curvature (angle
+defect). Large meshes are clustered on a coarse proxy graph (faces grouped into cells by a
+multi-source Dijkstra, affinities summed) and the labels are carried back exactly.
+
+Afterwards every chart is made a connected, genus-0 surface with at least one boundary loop (a disk,
+possibly with holes): fragments are merged into a neighbour and closed or handle-bearing pieces are
+bisected along their Fiedler vector until they are disks.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components as _cc
+from scipy.sparse.csgraph import dijkstra
+
+from .errors import ConfigError
+from .linalg import smallest_eigenpairs
+from .mesh import (
+    angle_defect,
+    boundary_edges,
+    edges,
+    euler_characteristic,
+    face_adjacency,
+    face_areas,
+    face_normals,
+    is_vertex_manifold,
+)
+
+log = logging.getLogger(__name__)
+
+__all__ = [
+    "SegmentConfig",
+    "Segmentation",
+    "face_affinity",
+    "fiedler_bisect",
+    "is_disk",
+    "segment",
+]
+
+
+#: Smallest affinity factor of an edge (see :func:`face_affinity`).
+AFFINITY_FLOOR = 0.05
+
+
+@dataclass(frozen=True)
+class SegmentConfig:
+    """Options of :func:`segment`.
+
+    Attributes
+    ----------
+    n_charts : int or None
+        Fixed number of charts; default from the curvature.
+    curvature_per_chart : float
+        Integrated ``|K|`` (radians) per chart when ``n_charts`` is None: a hemisphere carries
+        ``2 pi``.
+    max_charts : int
+        Upper bound on the number of clustered charts (the split stage may add more).
+    max_chart_faces : int
+        Clustering makes at least ``faces / max_chart_faces`` charts (keeps each solve fast).
+    concave_weight, convex_weight : float
+        Scale of the angular distance for concave and convex edges.
+    proxy_faces : int
+        Above this many faces, cluster a proxy graph of about this many cells.
+    """
+
+    n_charts: int | None = None
+    curvature_per_chart: float = 2 * np.pi
+    max_charts: int = 256
+    max_chart_faces: int = 20_000
+    concave_weight: float = 1.0
+    convex_weight: float = 0.2
+    proxy_faces: int = 20_000
+
+    def __post_init__(self) -> None:
+        if self.n_charts is not None and self.n_charts < 1:
+            raise ConfigError(f"n_charts is {self.n_charts}; it must be at least 1")
+        for name in ("curvature_per_chart", "concave_weight", "convex_weight"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"{name} is {getattr(self, name)}; it must be positive")
+        for name in ("max_charts", "max_chart_faces", "proxy_faces"):
+            if getattr(self, name) < 1:
+                raise ConfigError(f"{name} is {getattr(self, name)}; it must be at least 1")
+
+
+@dataclass(frozen=True)
+class Segmentation:
+    """Charts of a mesh.
+
+    Attributes
+    ----------
+    labels : (m,) int64 ndarray
+        Chart of every face, ``0 .. n_charts - 1``; every chart is a disk (possibly with holes).
+    n_charts : int
+    target_charts : int
+        The number of charts asked of the clustering (from the curvature or the config).
+    curvature : float
+        Integrated absolute Gaussian curvature (sum of ``|angle defect|``).
+    """
+
+    labels: np.ndarray
+    n_charts: int
+    target_charts: int
+    curvature: float
+
+
+def face_affinity(
+    V: np.ndarray,
+    F: np.ndarray,
+    *,
+    concave_weight: float = 1.0,
+    convex_weight: float = 0.2,
+) -> sp.csr_matrix:
+    """Symmetric face-graph affinity: ``w_ij = (l_ij / mean l) max(exp(-d_ij / mean d), floor)``.
+
+    ``d_ij = eta (1 - cos theta_ij)`` with ``theta`` the angle between the two faces' normals and
+    ``eta`` the concave or convex weight; ``l_ij`` the length of the shared edge.
+
+    Returns
+    -------
+    W : (m, m) scipy.sparse.csr_matrix
+    """
+    m = len(F)
+    pairs, edge = face_adjacency(F)
+    if len(pairs) == 0:
+        return sp.csr_matrix((m, m))
+    E, _ = edges(F)
+    N = face_normals(V, F)
+    C = V[F].mean(axis=1)
+    i, j = pairs[:, 0], pairs[:, 1]
+    cos = np.clip((N[i] * N[j]).sum(axis=1), -1.0, 1.0)
+    concave = ((C[j] - C[i]) * N[i]).sum(axis=1) > 0
+    d = np.where(concave, concave_weight, convex_weight) * (1.0 - cos)
+    length = np.linalg.norm(V[E[edge, 0]] - V[E[edge, 1]], axis=1)
+    # The floor keeps a few faces between two sharp creases from becoming an island that the
+    # normalized cut would rather cut off than make a real chart boundary.
+    w = (length / length.mean()) * np.maximum(np.exp(-d / max(d.mean(), 1e-12)), AFFINITY_FLOOR)
+    W = sp.coo_matrix((np.r_[w, w], (np.r_[i, j], np.r_[j, i])), shape=(m, m)).tocsr()
+    W.sum_duplicates()
+    return W
+
+
+def is_disk(F: np.ndarray) -> bool:
+    """True if the faces form one connected, manifold, genus-0 surface with a boundary."""
+    if len(F) == 0:
+        return False
+    W = _face_graph(F)
+    if _cc(W, directed=False)[0] != 1:
+        return False
+    B = boundary_edges(F)
+    if len(B) == 0:
+        return False
+    nb = len(np.unique(B))
+    if nb != len(B) or not is_vertex_manifold(F).all():
+        return False  # a pinched boundary: a vertex where the chart touches itself
+    from .mesh import boundary_loops
+
+    b = len(boundary_loops(F))
+    return euler_characteristic(F) == 2 - b
+
+
+def _face_graph(F: np.ndarray) -> sp.csr_matrix:
+    pairs, _ = face_adjacency(F)
+    m = len(F)
+    ones = np.ones(len(pairs))
+    return sp.coo_matrix((ones, (pairs[:, 0], pairs[:, 1])), shape=(m, m)).tocsr()
+
+
+def fiedler_bisect(W: np.ndarray | sp.spmatrix, *, seed: int = 0) -> np.ndarray:
+    """Split a connected graph in two halves by the median of its Fiedler vector.
+
+    Parameters
+    ----------
+    W : (m, m) sparse matrix
+        Symmetric non-negative affinity.
+
+    Returns
+    -------
+    (m,) bool ndarray
+        True for the nodes of one half; both halves are non-empty for ``m >= 2``.
+    """
+    W = sp.csr_matrix(W)
+    m = W.shape[0]
+    if m < 2:
+        return np.zeros(m, dtype=bool)
+    d = np.asarray(W.sum(axis=1)).ravel()
+    d_safe = np.where(d > 0, d, 1.0)
+    Dm = sp.diags(1 / np.sqrt(d_safe))
+    L = sp.identity(m) - Dm @ W @ Dm  # normalized Laplacian
+    if m <= 2:
+        return np.arange(m) == 0
+    _, vec = smallest_eigenpairs(L.tocsr(), 2, seed=seed)
+    f = vec[:, 1] / np.sqrt(d_safe)
+    order = np.argsort(f, kind="stable")
+    side = np.zeros(m, dtype=bool)
+    side[order[: m // 2]] = True
+    return side
+
+
+def _proxy_cells(W: sp.csr_matrix, n_cells: int, seed: int) -> np.ndarray:
+    """Group graph nodes into ``n_cells`` connected cells: Voronoi cells of random seed nodes."""
+    m = W.shape[0]
+    rng = np.random.default_rng(seed)
+    seeds = np.sort(rng.choice(m, size=min(n_cells, m), replace=False))
+    D = W.copy()
+    D.data = 1.0 / np.maximum(D.data, 1e-12)  # strong affinity = short distance
+    _, _, source = dijkstra(D, indices=seeds, min_only=True, return_predecessors=True)
+    cell = np.searchsorted(seeds, source)
+    unreached = source < 0  # another component without a seed: its own cells
+    if unreached.any():
+        _, comp = _cc(W[unreached][:, unreached], directed=False)
+        cell[unreached] = len(seeds) + comp
+    return np.unique(cell, return_inverse=True)[1].ravel()
+
+
+def _cluster(W: sp.csr_matrix, k: int, seed: int) -> np.ndarray:
+    """Spectral clustering of one connected graph into ``k`` clusters (scikit-learn)."""
+    from sklearn.cluster import SpectralClustering
+
+    m = W.shape[0]
+    if k <= 1 or m <= k:
+        return np.arange(m) if m <= k else np.zeros(m, dtype=np.int64)
+    model = SpectralClustering(
+        n_clusters=k,
+        affinity="precomputed",
+        assign_labels="cluster_qr",
+        eigen_solver="arpack",
+        random_state=seed,
+    )
+    return model.fit_predict(W).astype(np.int64)
+
+
+def _relabel_components(F: np.ndarray, labels: np.ndarray, W: sp.csr_matrix) -> np.ndarray:
+    """Split every label into its edge-connected components (one new label each)."""
+    m = len(F)
+    pairs, _ = face_adjacency(F)
+    same = labels[pairs[:, 0]] == labels[pairs[:, 1]]
+    G = sp.coo_matrix((np.ones(same.sum()), (pairs[same, 0], pairs[same, 1])), shape=(m, m)).tocsr()
+    _, comp = _cc(G, directed=False)
+    return np.unique(comp, return_inverse=True)[1].ravel().astype(np.int64)
+
+
+def _merge_small(F: np.ndarray, labels: np.ndarray, W: sp.csr_matrix, min_faces: int) -> np.ndarray:
+    """Merge charts smaller than ``min_faces`` into the neighbour they share most affinity with."""
+    for _ in range(8):  # a few passes; each merges every small chart at once
+        size = np.bincount(labels)
+        small = size[labels] < min_faces
+        if not small.any():
+            break
+        C = W.tocoo()
+        li, lj = labels[C.row], labels[C.col]
+        mask = small[C.row] & (li != lj)
+        if not mask.any():
+            break
+        n = labels.max() + 1
+        S = sp.coo_matrix((C.data[mask], (li[mask], lj[mask])), shape=(n, n)).tocsr()
+        target = np.asarray(S.argmax(axis=1)).ravel()
+        has = np.asarray(S.max(axis=1).todense()).ravel() > 0
+        # Only merge into a chart that is not itself merging away this pass (avoid cycles),
+        # unless it is bigger.
+        mapping = np.arange(n)
+        src = np.flatnonzero(has & (size < min_faces))
+        keep = (
+            (size[target[src]] >= min_faces)
+            | (size[target[src]] > size[src])
+            | ((size[target[src]] == size[src]) & (target[src] < src))
+        )
+        mapping[src[keep]] = target[src[keep]]
+        # Resolve chains a -> b -> c.
+        for _ in range(int(np.ceil(np.log2(max(n, 2)))) + 1):
+            mapping = mapping[mapping]
+        labels = np.unique(mapping[labels], return_inverse=True)[1].ravel()
+    return labels.astype(np.int64)
+
+
+def _make_disks(F: np.ndarray, labels: np.ndarray, W: sp.csr_matrix, seed: int) -> np.ndarray:
+    """Bisect every chart that is not a disk until all are (loop over charts only)."""
+    labels = labels.copy()
+    queue = list(range(int(labels.max()) + 1))
+    next_label = int(labels.max()) + 1
+    while queue:
+        c = queue.pop()
+        faces = np.flatnonzero(labels == c)
+        if len(faces) == 0 or is_disk(F[faces]):
+            continue
+        if len(faces) == 1:
+            continue  # a single triangle is always a disk; unreachable in practice
+        sub = W[faces][:, faces]
+        n_comp, comp = _cc(sub, directed=False)
+        if n_comp > 1:
+            parts = [faces[comp == k] for k in range(n_comp)]
+        else:
+            side = fiedler_bisect(sub, seed=seed)
+            parts = [faces[side], faces[~side]]
+            # A half may fall apart; its pieces are checked on their own.
+        for part in parts[1:]:
+            labels[part] = next_label
+            queue.append(next_label)
+            next_label += 1
+        queue.append(c)
+    return np.unique(labels, return_inverse=True)[1].ravel().astype(np.int64)
+
+
+def segment(
+    V: np.ndarray,
+    F: np.ndarray,
+    *,
+    config: SegmentConfig | None = None,
+    seed: int = 0,
+) -> Segmentation:
+    """Cut a (cleaned, manifold) mesh into disk-like charts by spectral clustering.
+
+    Parameters
+    ----------
+    V : (n, 3) float ndarray
+    F : (m, 3) int ndarray
+        Edge-manifold, consistently oriented (see :mod:`segparam.clean`).
+    config : SegmentConfig, optional
+    seed : int
+        Seeds the proxy cells and the clustering.
+
+    Returns
+    -------
+    Segmentation
+    """
+    cfg = config or SegmentConfig()
+    m = len(F)
+    curvature = float(np.abs(angle_defect(V, F)).sum())
+    if cfg.n_charts is not None:
+        target = cfg.n_charts
+    else:
+        target = int(np.ceil(curvature / cfg.curvature_per_chart))
+        target = max(target, int(np.ceil(m / cfg.max_chart_faces)), 1)
+    target = min(target, cfg.max_charts, m)
+    W = face_affinity(V, F, concave_weight=cfg.concave_weight, convex_weight=cfg.convex_weight)
+
+    n_comp, comp = _cc(W, directed=False)
+    area = face_areas(V, F)
+    comp_area = np.bincount(comp, weights=area, minlength=n_comp)
+    # Charts per component, proportional to area (every component gets at least one).
+    share = np.maximum(1, np.round(target * comp_area / comp_area.sum())).astype(int)
+    labels = np.empty(m, dtype=np.int64)
+    offset = 0
+    big = np.flatnonzero(share > 1)
+    single = share <= 1
+    labels[single[comp]] = comp[single[comp]] + 0  # temporary: unique per component
+    for c in big:  # loop over the few components that need clustering
+        faces = np.flatnonzero(comp == c)
+        sub = W[faces][:, faces]
+        k = int(min(share[c], len(faces)))
+        if len(faces) > cfg.proxy_faces:
+            cell = _proxy_cells(sub, cfg.proxy_faces, seed)
+            P = sp.csr_matrix(
+                (np.ones(len(faces)), (np.arange(len(faces)), cell)),
+                shape=(len(faces), cell.max() + 1),
+            )
+            coarse = (P.T @ sub @ P).tocsr()
+            coarse.setdiag(0)
+            coarse.eliminate_zeros()
+            sub_labels = _cluster(coarse, k, seed)[cell]
+        else:
+            sub_labels = _cluster(sub, k, seed)
+        labels[faces] = n_comp + offset + sub_labels
+        offset += k
+    labels = np.unique(labels, return_inverse=True)[1].ravel().astype(np.int64)
+    labels = _relabel_components(F, labels, W)
+    min_faces = max(2, int(0.1 * m / max(target, 1)))
+    labels = _merge_small(F, labels, W, min_faces)
+    labels = _make_disks(F, labels, W, seed)
+    n = int(labels.max()) + 1
+    log.info("segment: %d faces -> %d charts (target %d)", m, n, target)
+    return Segmentation(labels=labels, n_charts=n, target_charts=target, curvature=curvature)

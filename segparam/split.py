@@ -1,0 +1,247 @@
+"""Parameterize every chart; split the charts that fail and try again.
+
+Each chart goes to the Hessian solver (:func:`segparam.parameterize.parameterize_chart`). A chart
+whose map is not bijective, or misses the distortion target, is bisected along the Fiedler vector of
+its face graph (with the segmentation's crease-aware affinities, so cuts prefer high curvature) and
+both halves are solved again, recursively, up to a depth limit. Pieces too small for the solver,
+and pieces past the depth limit, are projected onto their best-fit plane, and that projection is
+kept only if it is bijective; otherwise they are bisected further. A single triangle always
+projects bijectively, so the recursion ends and every chart that leaves this stage is bijective.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse.csgraph import connected_components as _cc
+
+from .errors import ConfigError, InvalidMeshError
+from .parameterize import MIN_POINTS, parameterize_chart
+from .quality import ChartQuality, chart_quality
+from .segment import face_affinity, fiedler_bisect, is_disk
+
+log = logging.getLogger(__name__)
+
+__all__ = ["Chart", "ChartSet", "SplitConfig", "parameterize_charts", "project_chart"]
+
+
+@dataclass(frozen=True)
+class SplitConfig:
+    """Options of :func:`parameterize_charts`.
+
+    Attributes
+    ----------
+    method, tangent : str
+        Passed to the solver.
+    max_depth : int
+        Most bisections of one segmentation chart before the planar fallback takes over.
+    max_distortion : float or None
+        Angle-distortion target: a bijective chart above it is split too (None: no target).
+    min_faces : int
+        Pieces with fewer faces skip the solver and use the planar projection.
+    """
+
+    method: str = "hessian"
+    tangent: str = "normals"
+    max_depth: int = 6
+    max_distortion: float | None = None
+    min_faces: int = 8
+
+    def __post_init__(self) -> None:
+        if self.max_depth < 0:
+            raise ConfigError(f"max_depth is {self.max_depth}; it must be >= 0")
+        if self.max_distortion is not None and not self.max_distortion >= 1:
+            raise ConfigError(f"max_distortion is {self.max_distortion}; it must be >= 1")
+        if self.min_faces < 1:
+            raise ConfigError(f"min_faces is {self.min_faces}; it must be >= 1")
+
+
+@dataclass(frozen=True)
+class Chart:
+    """One bijectively mapped chart.
+
+    Attributes
+    ----------
+    faces : (k,) int64 ndarray
+        Indices into the mesh's ``F``.
+    vertices : (n,) int64 ndarray
+        Mesh vertex of each local vertex; ``F[faces]`` equals ``vertices[local_F]``.
+    local_F : (k, 3) int64 ndarray
+        The chart's faces in local vertex indices.
+    uv : (n, 2) float64 ndarray
+        Near-isometric coordinates of the local vertices.
+    quality : ChartQuality
+    source : int
+        The segmentation chart it came from.
+    depth : int
+        Bisections from the segmentation chart to this piece.
+    method : str
+        ``"hessian"`` / ``"classic-hlle"`` (the solver) or ``"projection"`` (planar fallback).
+    """
+
+    faces: np.ndarray
+    vertices: np.ndarray
+    local_F: np.ndarray
+    uv: np.ndarray
+    quality: ChartQuality
+    source: int
+    depth: int
+    method: str
+
+
+@dataclass(frozen=True)
+class ChartSet:
+    """The charts of a mesh after split and retry.
+
+    Attributes
+    ----------
+    charts : tuple of Chart
+        All bijective; together they hold every face exactly once.
+    splits : (s,) int64 ndarray
+        Number of bisections each segmentation chart needed (``len(pieces) - 1``).
+    first_pass_bijective : (s,) bool ndarray
+        Whether the solver mapped each segmentation chart bijectively on its first try.
+    """
+
+    charts: tuple[Chart, ...]
+    splits: np.ndarray
+    first_pass_bijective: np.ndarray
+
+
+def _submesh(F: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    vertices, local = np.unique(F[faces].ravel(), return_inverse=True)
+    return vertices.astype(np.int64), local.reshape(-1, 3).astype(np.int64)
+
+
+def project_chart(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Orthogonal projection onto the least-squares plane, oriented to keep the winding.
+
+    The normal is the area-weighted mean face normal (it faces the same way as the triangles), so
+    a piece that is a height field over that plane maps without flips.
+
+    Returns
+    -------
+    (n, 2) float64 ndarray
+    """
+    from .mesh import face_normals
+
+    areas = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    n = (face_normals(V, F) * areas[:, None]).sum(axis=0)
+    if np.linalg.norm(n) < 1e-300:
+        n = np.linalg.svd(V - V.mean(axis=0), full_matrices=False)[2][-1]
+    n = n / np.linalg.norm(n)
+    helper = np.array([1.0, 0, 0]) if abs(n[0]) < 0.9 else np.array([0, 1.0, 0])
+    b1 = np.cross(n, helper)
+    b1 /= np.linalg.norm(b1)
+    b2 = np.cross(n, b1)
+    X = V - V.mean(axis=0)
+    return np.stack([X @ b1, X @ b2], axis=1)
+
+
+def parameterize_charts(
+    V: np.ndarray,
+    F: np.ndarray,
+    labels: np.ndarray,
+    *,
+    config: SplitConfig | None = None,
+    seed: int = 0,
+    progress: Callable[[int], None] | None = None,
+) -> ChartSet:
+    """Map every chart of a segmentation bijectively, splitting the ones that fail.
+
+    Parameters
+    ----------
+    V : (n, 3) float ndarray
+    F : (m, 3) int ndarray
+    labels : (m,) int ndarray
+        Chart of each face (see :func:`segparam.segment.segment`).
+    config : SplitConfig, optional
+    seed : int
+    progress : callable, optional
+        Called with the number of segmentation charts finished so far.
+
+    Returns
+    -------
+    ChartSet
+    """
+    cfg = config or SplitConfig()
+    labels = np.asarray(labels, dtype=np.int64)
+    n_src = int(labels.max()) + 1
+    W = face_affinity(V, F)
+    order = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[order], np.arange(n_src + 1))
+    charts: list[Chart] = []
+    splits = np.zeros(n_src, dtype=np.int64)
+    first = np.zeros(n_src, dtype=bool)
+    for src in range(n_src):  # loop over charts
+        stack = [(order[bounds[src] : bounds[src + 1]], 0)]
+        pieces = 0
+        while stack:
+            faces, depth = stack.pop()
+            chart = _try_piece(V, F, faces, src, depth, cfg, seed)
+            if depth == 0:
+                first[src] = chart is not None and chart.method != "projection"
+            if chart is not None:
+                charts.append(chart)
+                pieces += 1
+                continue
+            sub = W[faces][:, faces]
+            n_comp, comp = _cc(sub, directed=False)
+            if n_comp > 1:
+                parts = [faces[comp == k] for k in range(n_comp)]
+            else:
+                side = fiedler_bisect(sub, seed=seed)
+                parts = [faces[side], faces[~side]]
+            stack.extend((p, depth + 1) for p in reversed(parts) if len(p))
+        splits[src] = pieces - 1
+        if progress is not None:
+            progress(src + 1)
+    return ChartSet(charts=tuple(charts), splits=splits, first_pass_bijective=first)
+
+
+def _try_piece(
+    V: np.ndarray,
+    F: np.ndarray,
+    faces: np.ndarray,
+    src: int,
+    depth: int,
+    cfg: SplitConfig,
+    seed: int,
+) -> Chart | None:
+    """A bijective chart for these faces, or None if the piece must be split."""
+    vertices, local_F = _submesh(F, faces)
+    Vl = V[vertices]
+    small = len(faces) < cfg.min_faces or len(vertices) < MIN_POINTS
+    if not small and depth <= cfg.max_depth:
+        try:
+            result = parameterize_chart(
+                Vl, local_F, method=cfg.method, tangent=cfg.tangent, seed=seed
+            )
+        except InvalidMeshError as exc:  # not a disk (e.g. a half that pinches): split it
+            log.debug("chart %d depth %d: %s", src, depth, exc)
+            return None
+        ok = result.bijective and (
+            cfg.max_distortion is None or result.quality.angle_distortion <= cfg.max_distortion
+        )
+        if ok:
+            return Chart(
+                faces, vertices, local_F, result.uv, result.quality, src, depth, result.method
+            )
+        return None
+    if len(faces) > 1 and not is_disk(local_F):
+        return None
+    uv = project_chart(Vl, local_F)
+    quality = chart_quality(Vl, local_F, uv)
+    if quality.bijective or len(faces) == 1:
+        return Chart(faces, vertices, local_F, uv, quality, src, depth, "projection")
+    return None
+
+
+def chart_face_cover(charts: tuple[Chart, ...], m: int) -> np.ndarray:
+    """How many charts hold each face (1 everywhere for a valid chart set)."""
+    if not charts:
+        return np.zeros(m, dtype=np.int64)
+    return np.bincount(np.concatenate([c.faces for c in charts]), minlength=m)

@@ -1,0 +1,107 @@
+import numpy as np
+import pytest
+import trimesh
+from meshes import plate_with_holes, tri_grid
+
+from segparam.errors import ConfigError
+from segparam.mesh import connected_components
+from segparam.segment import SegmentConfig, face_affinity, fiedler_bisect, is_disk, segment
+
+
+def icosphere():
+    m = trimesh.creation.icosphere(3)
+    return np.asarray(m.vertices), np.asarray(m.faces, dtype=np.int64)
+
+
+def torus():
+    m = trimesh.creation.torus(2.0, 0.7, major_sections=32, minor_sections=16)
+    return np.asarray(m.vertices), np.asarray(m.faces, dtype=np.int64)
+
+
+def two_tori():
+    a = trimesh.creation.torus(2.0, 0.7, major_sections=24, minor_sections=12)
+    b = a.copy()
+    b.apply_translation([5.0, 0, 0])
+    return trimesh.util.concatenate([a, b])
+
+
+def box_with_sharp_edges():
+    m = trimesh.creation.box(extents=[2, 1, 0.5])
+    m = m.subdivide().subdivide().subdivide()
+    return np.asarray(m.vertices), np.asarray(m.faces, dtype=np.int64)
+
+
+def assert_valid(F, seg):
+    assert seg.labels.shape == (len(F),)
+    assert set(np.unique(seg.labels)) == set(range(seg.n_charts))  # every face in one chart
+    for c in range(seg.n_charts):
+        assert is_disk(F[seg.labels == c]), f"chart {c} is not a disk"
+
+
+@pytest.mark.parametrize("make", [icosphere, torus, box_with_sharp_edges, plate_with_holes])
+def test_charts_are_disks(make):
+    V, F = make()
+    seg = segment(V, F)
+    assert seg.n_charts >= 2  # closed surfaces must be cut
+    assert_valid(F, seg)
+
+
+def test_two_components_each_cut():
+    m = two_tori()
+    V, F = np.asarray(m.vertices), np.asarray(m.faces, dtype=np.int64)
+    seg = segment(V, F)
+    assert_valid(F, seg)
+    count, comp = connected_components(F)
+    assert count == 2
+    for c in range(seg.n_charts):  # no chart spans two components
+        assert len(np.unique(comp[seg.labels == c])) == 1
+
+
+def test_chart_count_follows_curvature():
+    V, F = icosphere()
+    few = segment(V, F, config=SegmentConfig(curvature_per_chart=2 * np.pi))
+    many = segment(V, F, config=SegmentConfig(curvature_per_chart=np.pi / 4))
+    assert few.curvature == pytest.approx(4 * np.pi)
+    assert few.target_charts == 2 and many.target_charts == 16
+    assert many.n_charts > few.n_charts
+
+
+def test_cuts_follow_sharp_edges():
+    V, F = box_with_sharp_edges()
+    seg = segment(V, F, config=SegmentConfig(n_charts=6))
+    # Most faces of each box side share a chart: the cuts run along the box's edges.
+    N = np.round(trimesh.Trimesh(V, F, process=False).face_normals).astype(int)
+    side = np.unique(N, axis=0, return_inverse=True)[1].ravel()
+    purity = sum(np.bincount(side[seg.labels == c]).max() for c in range(seg.n_charts)) / len(F)
+    assert purity > 0.9
+
+
+def test_open_disk_stays_one_chart_when_asked():
+    V, F = tri_grid(10, 10)
+    seg = segment(V, F, config=SegmentConfig(n_charts=1))
+    assert seg.n_charts == 1 and is_disk(F)
+
+
+def test_deterministic():
+    V, F = torus()
+    a = segment(V, F, seed=3)
+    b = segment(V, F, seed=3)
+    assert np.array_equal(a.labels, b.labels)
+
+
+def test_affinity_and_bisection():
+    V, F = tri_grid(12, 6)
+    W = face_affinity(V, F)
+    assert abs(W - W.T).max() == 0 and W.min() >= 0
+    side = fiedler_bisect(W)
+    assert side.sum() == len(F) // 2
+    # A long strip is cut across its length: the halves are the left and right ends.
+    x = V[F].mean(1)[:, 0]
+    assert abs(x[side].mean() - x[~side].mean()) > 0.4
+
+
+def test_config_errors():
+    with pytest.raises(ConfigError, match="n_charts is 0"):
+        SegmentConfig(n_charts=0)
+    with pytest.raises(ConfigError, match="curvature_per_chart"):
+        SegmentConfig(curvature_per_chart=-1)

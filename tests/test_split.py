@@ -1,0 +1,81 @@
+import numpy as np
+import pytest
+import trimesh
+from meshes import folded_strip, plate_with_holes, tri_grid
+
+from segparam.errors import ConfigError
+from segparam.quality import chart_quality
+from segparam.segment import segment
+from segparam.split import SplitConfig, chart_face_cover, parameterize_charts, project_chart
+
+
+def check_chart_set(V, F, cs):
+    assert (chart_face_cover(cs.charts, len(F)) == 1).all()  # every face exactly once
+    for c in cs.charts:
+        assert np.array_equal(F[c.faces], c.vertices[c.local_F])
+        # Independent recomputation: the stored verdict is the quality module's verdict.
+        q = chart_quality(V[c.vertices], c.local_F, c.uv)
+        assert q.bijective and q == c.quality
+
+
+@pytest.mark.parametrize(
+    "mesh",
+    [
+        lambda: plate_with_holes(),
+        lambda: (lambda m: (np.asarray(m.vertices), np.asarray(m.faces)))(
+            trimesh.creation.torus(2.0, 0.7, major_sections=32, minor_sections=16)
+        ),
+    ],
+)
+def test_closed_surfaces_end_bijective(mesh):
+    V, F = mesh()
+    seg = segment(V, F)
+    cs = parameterize_charts(V, F, seg.labels)
+    check_chart_set(V, F, cs)
+    assert len(cs.splits) == seg.n_charts
+
+
+def test_failing_chart_is_split_until_bijective():
+    # A helicoid-like ribbon turned 1.4 times round an axis: the planar fallback alone cannot
+    # map it, and a distortion target the solver cannot meet forces splits.
+    V, F = tri_grid(60, 6, width=6.0, height=0.5)
+    th = V[:, 0] / 6.0 * 2 * np.pi * 1.4
+    r = 1.0 + V[:, 1]
+    V3 = np.stack([r * np.cos(th), r * np.sin(th), 0.05 * V[:, 0]], 1)
+    labels = np.zeros(len(F), dtype=np.int64)
+    cs = parameterize_charts(V3, F, labels, config=SplitConfig(max_distortion=1.0001))
+    check_chart_set(V3, F, cs)
+    assert cs.splits[0] >= 1 and len(cs.charts) == cs.splits[0] + 1
+    assert max(c.depth for c in cs.charts) >= 1
+
+
+def test_easy_chart_is_not_split():
+    V, F = folded_strip()
+    cs = parameterize_charts(V, F, np.zeros(len(F), dtype=np.int64))
+    assert len(cs.charts) == 1 and cs.splits[0] == 0 and cs.first_pass_bijective[0]
+    assert cs.charts[0].method == "hessian"
+
+
+def test_depth_limit_falls_back_to_bijective_projection():
+    V, F = tri_grid(20, 20)
+    V[:, 2] = np.sin(6 * V[:, 0]) * 0.3
+    cs = parameterize_charts(
+        V, F, np.zeros(len(F), dtype=np.int64), config=SplitConfig(max_depth=0, max_distortion=1.0)
+    )
+    check_chart_set(V, F, cs)
+    assert all(c.method == "projection" for c in cs.charts if c.depth > 0)
+
+
+def test_projection_keeps_winding():
+    V, F = tri_grid(5, 5)
+    uv = project_chart(V, F)
+    assert chart_quality(V, F, uv).bijective
+    uv2 = project_chart(V, F[:, ::-1])
+    assert chart_quality(V, F[:, ::-1], uv2).bijective
+
+
+def test_config_errors():
+    with pytest.raises(ConfigError, match="max_depth"):
+        SplitConfig(max_depth=-1)
+    with pytest.raises(ConfigError, match="max_distortion"):
+        SplitConfig(max_distortion=0.5)
