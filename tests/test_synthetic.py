@@ -1,0 +1,215 @@
+"""Tests of the synthetic cortex-like meshes (segparam.synthetic)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from segparam import mesh, synthetic
+from segparam.errors import InvalidMeshError
+from segparam.synthetic import brain_like_parcels, brain_like_surface
+
+
+def _angles(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """(m, 3) corner angles in degrees."""
+    P = V[F]
+    out = np.empty(F.shape)
+    for k in range(3):
+        a = P[:, (k + 1) % 3] - P[:, k]
+        b = P[:, (k + 2) % 3] - P[:, k]
+        cos = np.einsum("ij,ij->i", a, b) / np.linalg.norm(a, axis=1) / np.linalg.norm(b, axis=1)
+        out[:, k] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    return out
+
+
+def _signed_volume(V: np.ndarray, F: np.ndarray) -> float:
+    return float(np.einsum("ij,ij->i", V[F[:, 0]], np.cross(V[F[:, 1]], V[F[:, 2]])).sum() / 6.0)
+
+
+def _total_abs_curvature(V: np.ndarray, F: np.ndarray) -> float:
+    """Sum over vertices of |angle defect| (discrete total absolute Gaussian curvature)."""
+    defect = 2.0 * np.pi - np.bincount(F.ravel(), np.radians(_angles(V, F)).ravel(), len(V))
+    return float(np.abs(defect).sum())
+
+
+@pytest.fixture(scope="module")
+def surface() -> tuple[np.ndarray, np.ndarray]:
+    return brain_like_surface(20000, seed=3)
+
+
+@pytest.fixture(scope="module")
+def small_parcels() -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray]:
+    return synthetic._brain_parcels(12, mean_faces=500, min_faces=150, max_faces=1500, seed=1)
+
+
+def test_surface_is_closed_oriented_genus0(surface):
+    V, F = surface
+    assert V.dtype == np.float64 and V.shape[1] == 3
+    assert F.dtype == np.int64 and F.shape[1] == 3
+    assert np.array_equal(np.unique(F), np.arange(len(V)))
+    _, count = mesh.edge_face_counts(F)
+    assert np.all(count == 2)
+    assert mesh.is_edge_manifold(F)  # also: every edge traversed once each way
+    assert mesh.is_vertex_manifold(F).all()
+    assert mesh.euler_characteristic(F) == 2
+    assert mesh.boundary_loops(F) == []
+    assert _signed_volume(V, F) > 0.0
+
+
+def test_surface_is_radial_graph_so_embedded(surface):
+    # the directions of the vertices triangulate the sphere without flips: no self-intersection
+    V, F = surface
+    U = V / np.linalg.norm(V, axis=1, keepdims=True)
+    n = np.cross(U[F[:, 1]] - U[F[:, 0]], U[F[:, 2]] - U[F[:, 0]])
+    assert np.all(np.einsum("ij,ij->i", n, U[F].sum(axis=1)) > 0.0)
+
+
+@pytest.mark.parametrize("n_faces", [100, 1001, 5000, 33333, 90000])
+def test_face_count_near_target(n_faces):
+    V, F = brain_like_surface(n_faces)
+    assert abs(len(F) - n_faces) <= max(2, 0.01 * n_faces)
+    assert mesh.euler_characteristic(F) == 2
+
+
+@pytest.mark.parametrize("n_faces", [1000, 8000, 40000])
+def test_triangle_quality(n_faces):
+    V, F = brain_like_surface(n_faces, seed=1)
+    min_angle = _angles(V, F).min(axis=1)
+    assert np.percentile(min_angle, 1) >= 20.0
+    assert min_angle.min() >= 10.0
+    valence = np.bincount(F.ravel())
+    assert abs(valence.mean() - 6.0) < 0.05
+    assert valence.min() >= 4 and valence.max() <= 8
+
+
+def test_deterministic_and_seeded():
+    V1, F1 = brain_like_surface(3000, seed=5)
+    V2, F2 = brain_like_surface(3000, seed=5)
+    V3, F3 = brain_like_surface(3000, seed=6)
+    assert V1.tobytes() == V2.tobytes() and F1.tobytes() == F2.tobytes()
+    assert np.array_equal(F1, F3)  # same sphere triangulation, different folds
+    assert not np.allclose(V1, V3)
+
+
+def test_no_folding_is_smooth_ellipsoid():
+    V0, F0 = brain_like_surface(20000, folding=0.0)
+    V1, F1 = brain_like_surface(20000, folding=1.0)
+    k0 = _total_abs_curvature(V0, F0)
+    k1 = _total_abs_curvature(V1, F1)
+    assert k0 == pytest.approx(4.0 * np.pi, rel=0.02)  # convex: Gauss-Bonnet, no negative K
+    assert k1 > 4.0 * k0
+    r = np.linalg.norm(V0, axis=1)
+    assert 27.0 < r.min() and r.max() < 71.0
+
+
+def test_parameters_change_the_folds():
+    V, _ = brain_like_surface(20000, folding=0.5)
+    W, _ = brain_like_surface(20000, folding=1.0)
+    depth_half = np.ptp(np.linalg.norm(V, axis=1))
+    depth_full = np.ptp(np.linalg.norm(W, axis=1))
+    assert depth_half < depth_full
+    Vh, _ = brain_like_surface(20000, frequency=0.6)
+    assert not np.allclose(Vh, W)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"n_faces": 99},
+        {"n_faces": 1000, "folding": -1.0},
+        {"n_faces": 1000, "frequency": 0.0},
+        {"n_faces": 1000, "irregularity": 1.5},
+    ],
+)
+def test_surface_rejects_bad_arguments(kwargs):
+    with pytest.raises(InvalidMeshError):
+        brain_like_surface(**kwargs)
+
+
+def test_is_disk_on_small_meshes():
+    fan = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4]])
+    assert synthetic._is_disk(fan)
+    bowtie = np.array([[0, 1, 2], [0, 3, 4]])  # two triangles sharing a vertex
+    assert not synthetic._is_disk(bowtie)
+    annulus = np.array([[0, 1, 4], [1, 5, 4], [1, 2, 5], [2, 6, 5], [2, 3, 6], [3, 7, 6]])
+    annulus = np.vstack([annulus, [[3, 0, 7], [0, 4, 7]]])
+    assert not synthetic._is_disk(annulus)
+
+
+def test_face_neighbors_match_mesh_face_adjacency(surface):
+    _, F = surface
+    adj = synthetic._face_neighbors(F)
+    pairs = np.sort(np.column_stack([np.repeat(np.arange(len(F)), 3), adj.ravel()]), axis=1)
+    expected, _ = mesh.face_adjacency(F)
+    assert np.array_equal(np.unique(pairs, axis=0), np.unique(expected, axis=0))
+
+
+@pytest.mark.slow
+def test_folding_adds_area():
+    # only on fine meshes: coarse ones lengthen the folds at fixed depth and gain no area
+    V, F = brain_like_surface(100000, seed=3)
+    V0, F0 = brain_like_surface(100000, folding=0.0, seed=3)
+    ratio = mesh.face_areas(V, F).sum() / mesh.face_areas(V0, F0).sum()
+    assert 1.15 < ratio < 1.6
+
+
+def _check_parcel(V: np.ndarray, F: np.ndarray) -> None:
+    assert V.dtype == np.float64 and F.dtype == np.int64
+    assert np.array_equal(np.unique(F), np.arange(len(V)))
+    assert mesh.is_edge_manifold(F)
+    assert mesh.is_vertex_manifold(F).all()
+    assert mesh.connected_components(F)[0] == 1
+    assert mesh.euler_characteristic(F) == 1
+    assert len(mesh.boundary_loops(F)) == 1
+
+
+def test_small_parcels_are_disks(small_parcels):
+    parcels, hot = small_parcels
+    assert len(parcels) == 12
+    sizes = np.array([len(F) for _, F in parcels])
+    assert sizes.min() >= 150 and sizes.max() <= 1500
+    assert 300 < sizes.mean() < 800
+    for V, F in parcels:
+        _check_parcel(V, F)
+        # outward winding: normals point away from the hemisphere centre on average
+        n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+        assert np.einsum("ij,ij->", n, V[F].mean(axis=1)) > 0.0
+    assert hot.sum() >= 1
+
+
+def test_parcels_deterministic():
+    a = brain_like_parcels(6, mean_faces=300, min_faces=100, max_faces=900, seed=4)
+    b = brain_like_parcels(6, mean_faces=300, min_faces=100, max_faces=900, seed=4)
+    c = brain_like_parcels(6, mean_faces=300, min_faces=100, max_faces=900, seed=5)
+    assert all(
+        x[0].tobytes() == y[0].tobytes() and x[1].tobytes() == y[1].tobytes()
+        for x, y in zip(a, b, strict=True)
+    )
+    assert any(
+        x[0].shape != y[0].shape or not np.allclose(x[0], y[0]) for x, y in zip(a, c, strict=True)
+    )
+
+
+def test_parcels_reject_bad_bounds():
+    with pytest.raises(InvalidMeshError):
+        brain_like_parcels(5, mean_faces=100, min_faces=300, max_faces=3000)
+    with pytest.raises(InvalidMeshError):
+        brain_like_parcels(0)
+
+
+@pytest.mark.slow
+def test_atlas_parcels():
+    parcels, hot = synthetic._brain_parcels(
+        89, mean_faces=1000, min_faces=300, max_faces=3000, seed=0
+    )
+    assert len(parcels) == 89
+    sizes = np.array([len(F) for _, F in parcels])
+    assert sizes.min() >= 300 and sizes.max() <= 3000
+    assert 800 < sizes.mean() < 1250
+    assert 0.10 <= hot.mean() <= 0.20
+    for V, F in parcels:
+        _check_parcel(V, F)
+        # compact: the boundary is not much longer than a disc's of the same area
+        B = mesh.boundary_edges(F)
+        perimeter = np.linalg.norm(V[B[:, 0]] - V[B[:, 1]], axis=1).sum()
+        assert perimeter**2 / (4.0 * np.pi * mesh.face_areas(V, F).sum()) < 6.0
