@@ -25,7 +25,14 @@ from scipy.spatial import cKDTree
 
 from .mesh import boundary_edges, boundary_loops, corner_angles, face_areas
 
-__all__ = ["ChartQuality", "boundary_crossings", "chart_quality", "jacobians", "signed_areas"]
+__all__ = [
+    "ChartQuality",
+    "boundary_crossings",
+    "chart_quality",
+    "distortion",
+    "jacobians",
+    "signed_areas",
+]
 
 #: Relative uv area below which a triangle counts as degenerate.
 DEGENERATE_AREA = 1e-12
@@ -114,13 +121,17 @@ def jacobians(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> np.ndarray:
 
 
 def singular_values(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Closed-form singular values ``s1 >= s2 >= 0`` of stacked 2x2 matrices."""
-    fro2 = (J**2).sum(axis=(1, 2))
-    det = np.abs(J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0])
-    disc = np.sqrt(np.maximum(fro2**2 - 4 * det**2, 0.0))
-    s1 = np.sqrt((fro2 + disc) / 2)
-    s2 = np.divide(det, s1, out=np.zeros_like(s1), where=s1 > 0)
-    return s1, s2
+    """Singular values ``s1 >= s2 >= 0`` of stacked 2x2 matrices, in closed form.
+
+    ``s1, s2 = (|z1| +- |z2|) / 2`` with ``z1 = (a + d, c - b)``, ``z2 = (a - d, b + c)`` (the
+    conformal / anti-conformal split), which stays accurate near isometries, where the textbook
+    ``sqrt(tr^2 - 4 det^2)`` form cancels.
+    """
+    a, b = J[:, 0, 0], J[:, 0, 1]
+    c, d = J[:, 1, 0], J[:, 1, 1]
+    q = np.hypot(a + d, c - b)
+    r = np.hypot(a - d, b + c)
+    return (q + r) / 2, np.abs(q - r) / 2
 
 
 def boundary_crossings(uv: np.ndarray, B: np.ndarray) -> int:
@@ -188,8 +199,6 @@ def chart_quality(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> ChartQuality:
     -------
     ChartQuality
     """
-    area3 = face_areas(V, F)
-    total3 = float(area3.sum())
     sa = signed_areas(uv, F)
     total_uv = float(np.abs(sa).sum())
     degenerate = np.abs(sa) <= DEGENERATE_AREA * max(total_uv, np.finfo(float).tiny)
@@ -219,17 +228,7 @@ def chart_quality(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> ChartQuality:
         not flipped.any() and not degenerate.any() and n_branch == 0 and n_cross == 0 and oriented
     )
 
-    # Distortion after scaling uv area to 3-D area.
-    scale = np.sqrt(total3 / total_uv) if total_uv > 0 else 1.0
-    s1, s2 = singular_values(jacobians(V, F, uv * scale))
-    w = area3 / total3
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv1, inv2 = 1.0 / s1, 1.0 / s2  # singular values of the inverse map uv -> surface
-        l2 = float(np.sqrt((w * (inv1**2 + inv2**2) / 2).sum()))
-        linf = float(inv2.max())
-        angle = float((w * (s1 / s2)).sum())
-        area = float((w * np.abs(np.log(s1 * s2))).sum())
-        dirichlet = float((w * (s1**2 + s2**2 + inv1**2 + inv2**2)).sum())
+    d = distortion(V, F, uv)
     return ChartQuality(
         n_flipped=int(flipped.sum()),
         n_degenerate=int(degenerate.sum()),
@@ -237,9 +236,35 @@ def chart_quality(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> ChartQuality:
         n_crossings=n_cross,
         loops_oriented=oriented,
         bijective=bool(bijective),
-        l2_stretch=l2,
-        linf_stretch=linf,
-        angle_distortion=angle,
-        area_distortion=area,
-        symmetric_dirichlet=dirichlet,
+        **d,
     )
+
+
+def distortion(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> dict[str, float]:
+    """Area-weighted distortion of ``(V, F) -> uv`` after scaling uv area to 3-D area.
+
+    Works on any set of triangles (one chart or a whole atlas with seams): each face is measured
+    on its own.
+
+    Returns
+    -------
+    dict
+        ``l2_stretch``, ``linf_stretch`` (Sander et al. 2001, of the map uv -> surface, 1 for an
+        isometry), ``angle_distortion`` (mean ``s1 / s2``), ``area_distortion`` (mean
+        ``|log(s1 s2)|``), ``symmetric_dirichlet`` (mean ``s1^2 + s2^2 + s1^-2 + s2^-2``).
+    """
+    area3 = face_areas(V, F)
+    total3 = float(area3.sum())
+    total_uv = float(np.abs(signed_areas(uv, F)).sum())
+    scale = np.sqrt(total3 / total_uv) if total_uv > 0 else 1.0
+    s1, s2 = singular_values(jacobians(V, F, uv * scale))
+    w = area3 / total3
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv1, inv2 = 1.0 / s1, 1.0 / s2  # singular values of the inverse map uv -> surface
+        return {
+            "l2_stretch": float(np.sqrt((w * (inv1**2 + inv2**2) / 2).sum())),
+            "linf_stretch": float(inv2.max()),
+            "angle_distortion": float((w * (s1 / s2)).sum()),
+            "area_distortion": float((w * np.abs(np.log(s1 * s2))).sum()),
+            "symmetric_dirichlet": float((w * (s1**2 + s2**2 + inv1**2 + inv2**2)).sum()),
+        }

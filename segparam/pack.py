@@ -1,0 +1,913 @@
+"""Stage 6: pack the charts into the unit square.
+
+Every chart arrives mapped bijectively to the plane, at an arbitrary position, scale and rotation.
+This stage
+
+1. scales each chart so that its uv area equals its 3-D area (one texel density for the atlas);
+2. rotates it to its minimum-area bounding box (rotating calipers on the convex hull);
+3. places all charts in the texture square, with quarter turns, so that the charts' texel
+   footprints are `padding` empty texels apart from each other and from the border;
+4. maximizes the one global scale for which that placement exists, and reports the utilization.
+
+Two placement methods are offered:
+
+``"raster"`` (default)
+    Packs the charts' real shapes. Each chart is rasterized conservatively (every texel that a
+    triangle touches is occupied) and placed, largest first, at the lowest then left-most
+    position where its footprint avoids the already placed footprints dilated by `padding`.
+    Fitting positions are found on a coarse grid by FFT correlation, then refined texel by
+    texel. The global scale is found by bisection.
+``"rect"``
+    Packs the padded bounding boxes of the footprints with the MaxRects packer of `rectpack`,
+    with the same bisection on the global scale.
+
+Measured with ``benchmarks/bench_pack.py`` (padding 2, 1024 texels): on two sets of 50 mixed
+charts the raster packer reaches utilization 0.72-0.73 against 0.66-0.68 for rect; on xatlas's own
+charts of an icosphere and a torus 0.60 / 0.58 against 0.53 / 0.48 (xatlas's packing: 0.41 /
+0.54). So raster is the default; rect is much faster (about 0.1 s against 1-2 s for 50 charts).
+
+Conventions: a texel ``(i, j)`` of a ``resolution x resolution`` texture covers
+``[j, j + 1] x [i, i + 1] / resolution`` in uv, i.e. occupancy grids are indexed ``[row = v,
+col = u]`` with row 0 at v = 0. A triangle touches a texel when the closed triangle and the closed
+texel square intersect.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.fft
+from numpy.typing import ArrayLike
+from scipy.ndimage import maximum_filter
+from scipy.spatial import ConvexHull, QhullError
+
+from segparam.errors import ConfigError, InvalidMeshError, SolverError
+
+__all__ = [
+    "PackConfig",
+    "PackResult",
+    "footprint_conflicts",
+    "min_area_rotation",
+    "pack_charts",
+    "rasterize_footprint",
+]
+
+logger = logging.getLogger(__name__)
+
+_METHODS = ("raster", "rect")
+# Tolerance (in texels) of the rasterizer used to place charts. It is larger than the one of
+# the public `rasterize_footprint`, so that round-off in composing the final affine maps can
+# never make a verified footprint larger than the footprint that was packed.
+_PACK_EPS = 1e-4
+_CHECK_EPS = 1e-7
+# Each chart is centred in its footprint box with at least this margin (texels) on every side.
+_MARGIN = 1e-3
+# The raster packer searches positions on a grid of about this many cells per side.
+_COARSE_CELLS = 256
+# Coarse footprints with at most this many row runs are matched by row sums instead of FFT.
+_DIRECT_RUNS = 16
+_BAND_ROWS = 24
+# Candidate positions (in order of preference) refined texel by texel, per rotation.
+_CANDIDATES = 3
+_SLIDE_STEPS = 1024
+# Scale search: relative precision on the global scale and the maximum number of trial packings.
+_SCALE_TOL = 0.006
+_MAX_TRIALS = 6
+_MAX_SHRINK = 60
+_FIRST_GUESS = 0.88
+_RECT_ALGOS = ("MaxRectsBssf",)
+
+
+@dataclass(frozen=True)
+class PackConfig:
+    """Options of the packing stage.
+
+    Parameters
+    ----------
+    resolution : int
+        Texels per side of the square texture the atlas is packed for.
+    padding : int
+        Empty texels kept between the footprints of any two charts and between every footprint
+        and the border of the texture.
+    method : {"raster", "rect"}
+        ``"raster"`` packs the charts' rasterized shapes, ``"rect"`` their bounding boxes.
+    rotate : bool
+        Allow quarter turns of the charts while packing.
+
+    Raises
+    ------
+    ConfigError
+        If a value is out of range.
+    """
+
+    resolution: int = 1024
+    padding: int = 2
+    method: str = "raster"
+    rotate: bool = True
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.resolution, (int, np.integer)) or self.resolution < 1:
+            raise ConfigError(f"resolution must be a positive integer, got {self.resolution!r}")
+        if not isinstance(self.padding, (int, np.integer)) or self.padding < 0:
+            raise ConfigError(f"padding must be a non-negative integer, got {self.padding!r}")
+        if self.resolution <= 2 * self.padding:
+            raise ConfigError(
+                f"resolution {self.resolution} leaves no texel inside a border padding of "
+                f"{self.padding} texels on each side"
+            )
+        if self.method not in _METHODS:
+            raise ConfigError(f"method must be one of {_METHODS}, got {self.method!r}")
+
+
+@dataclass(frozen=True)
+class PackResult:
+    """The packed atlas.
+
+    Attributes
+    ----------
+    uvs : tuple of (n_i, 2) float ndarray
+        Per chart, the packed uv coordinates, inside ``[padding, resolution - padding] /
+        resolution`` on both axes.
+    scale : float
+        The global factor from 3-D length to uv length: every chart's uv area is
+        ``scale**2`` times its 3-D area.
+    transforms : (n_charts, 2, 3) float ndarray
+        Per chart the affine map ``uv_out = A[:, :2] @ uv_in + A[:, 2]``; a rotation times a
+        uniform scale (never a mirror).
+    utilization : float
+        Total uv triangle area over the area of the unit square.
+    resolution : int
+        Texels per side the layout was packed for.
+    padding : int
+        Padding in texels the layout respects at that resolution.
+    """
+
+    uvs: tuple[np.ndarray, ...]
+    scale: float
+    transforms: np.ndarray
+    utilization: float
+    resolution: int
+    padding: int
+
+
+@dataclass(frozen=True)
+class _Chart:
+    """A validated chart in its canonical frame (private; trusted by the kernels)."""
+
+    index: int
+    uv: np.ndarray  # (n, 2) the input coordinates
+    q: np.ndarray  # (n, 2) rotated, scaled to 3-D units, min corner at the origin
+    F: np.ndarray  # (m, 3) faces, counter-clockwise in q
+    extent: np.ndarray  # (2,) width and height of q's bounding box, 3-D units
+    to_q: np.ndarray  # (3, 3) affine map from the input uv to q
+    area: float  # 3-D area (= uv area of q)
+
+
+# ----------------------------------------------------------------------------------------------
+# geometry helpers
+
+
+def min_area_rotation(uv: np.ndarray) -> tuple[np.ndarray, float]:
+    """Rotate a point set so that its minimum-area bounding box is axis-aligned.
+
+    Rotating calipers: the minimum-area enclosing rectangle has a side collinear with an edge
+    of the convex hull, so every hull edge direction is tried. Of the optimal boxes the one
+    that comes out wider than tall is returned (ties broken by the first hull edge).
+
+    Parameters
+    ----------
+    uv : (n, 2) float ndarray
+        Points, n >= 3, not all collinear.
+
+    Returns
+    -------
+    rotated : (n, 2) float ndarray
+        ``uv @ R.T`` with ``R`` the rotation by `angle` about the origin.
+    angle : float
+        The counter-clockwise rotation applied, in radians, in ``(-pi, pi]``.
+
+    Raises
+    ------
+    InvalidMeshError
+        If `uv` is not an (n, 2) finite array or its points span no area.
+    """
+    uv = np.asarray(uv, dtype=np.float64)
+    if uv.ndim != 2 or uv.shape[1] != 2 or uv.shape[0] < 3:
+        raise InvalidMeshError(f"uv must be an (n, 2) array with n >= 3, got shape {uv.shape}")
+    if not np.all(np.isfinite(uv)):
+        raise InvalidMeshError("uv has non-finite coordinates")
+    angle = _min_area_angle(uv)
+    return uv @ _rotation(angle).T, angle
+
+
+def _rotation(angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s], [s, c]])
+
+
+def _min_area_angle(uv: np.ndarray) -> float:
+    centred = uv - uv.mean(axis=0)
+    try:
+        hull = ConvexHull(centred)
+    except QhullError as exc:
+        raise InvalidMeshError(
+            f"chart uv points span no area ({uv.shape[0]} points are collinear or coincide)"
+        ) from exc
+    H = centred[hull.vertices]  # counter-clockwise
+    d = np.roll(H, -1, axis=0) - H
+    theta = np.arctan2(d[:, 1], d[:, 0])
+    # rotating by -theta makes each hull edge horizontal; project the hull on both axes at once
+    c, s = np.cos(theta), np.sin(theta)
+    x = c[:, None] * H[None, :, 0] + s[:, None] * H[None, :, 1]
+    y = -s[:, None] * H[None, :, 0] + c[:, None] * H[None, :, 1]
+    w = x.max(axis=1) - x.min(axis=1)
+    h = y.max(axis=1) - y.min(axis=1)
+    area = w * h
+    # tolerant argmin so that symmetric shapes pick the same edge on every platform
+    best = int(np.flatnonzero(area <= area.min() * (1 + 1e-12))[0])
+    angle = -theta[best]
+    if h[best] > w[best]:
+        angle += np.pi / 2
+    return float(np.arctan2(np.sin(angle), np.cos(angle)))
+
+
+def _triangle_areas(uv: np.ndarray, F: np.ndarray) -> np.ndarray:
+    a, b, c = uv[F[:, 0]], uv[F[:, 1]], uv[F[:, 2]]
+    return 0.5 * (
+        (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    )
+
+
+# ----------------------------------------------------------------------------------------------
+# conservative rasterization
+
+
+def _raster_kernel(P: np.ndarray, F: np.ndarray, shape: tuple[int, int], eps: float) -> np.ndarray:
+    """Texels of a ``shape = (rows, cols)`` grid touched by triangles with texel coordinates P.
+
+    Exact for closed sets, row by row: the part of a triangle inside the slab of texel row
+    ``i`` (``i <= y <= i + 1``) is convex, so it touches the texels of that row that its x-range
+    meets. That x-range comes from the vertices inside the slab and the edges' crossings of
+    the slab's two lines. Every (triangle, row) pair gives one run of texels, and the runs are
+    filled with a cumulative sum. `eps` (texels) widens slabs and runs, so that anything within
+    `eps` of a texel touches it. Degenerate triangles keep their segments.
+    """
+    rows, cols = shape
+    mask = np.zeros(shape, dtype=bool)
+    if len(F) == 0:
+        return mask
+    tri = P[F]  # (m, 3, 2)
+    y = tri[..., 1]
+    lo = np.maximum(np.floor(y.min(axis=1) - eps).astype(np.int64), 0)
+    hi = np.minimum(np.floor(y.max(axis=1) + eps).astype(np.int64), rows - 1)
+    count = np.maximum(hi - lo + 1, 0)
+    t = np.repeat(np.arange(len(F)), count)
+    row = lo[t] + np.arange(len(t)) - np.repeat(np.cumsum(count) - count, count)
+    y0 = row - eps
+    y1 = row + 1 + eps
+    xmin = np.full(len(t), np.inf)
+    xmax = np.full(len(t), -np.inf)
+    T = tri[t]  # (pairs, 3, 2)
+    for v in range(3):
+        xv, yv = T[:, v, 0], T[:, v, 1]
+        inside = (yv >= y0) & (yv <= y1)
+        xmin = np.where(inside, np.minimum(xmin, xv), xmin)
+        xmax = np.where(inside, np.maximum(xmax, xv), xmax)
+        xw, yw = T[:, (v + 1) % 3, 0], T[:, (v + 1) % 3, 1]
+        dy = yw - yv
+        slope = np.divide(xw - xv, dy, out=np.zeros_like(dy), where=dy != 0)
+        ylow, yhigh = np.minimum(yv, yw), np.maximum(yv, yw)
+        for line in (y0, y1):
+            cross = (dy != 0) & (line >= ylow) & (line <= yhigh)
+            x = xv + (line - yv) * slope
+            xmin = np.where(cross, np.minimum(xmin, x), xmin)
+            xmax = np.where(cross, np.maximum(xmax, x), xmax)
+    ok = xmin <= xmax
+    x0 = np.maximum(np.floor(xmin[ok] - eps).astype(np.int64), 0)
+    x1 = np.minimum(np.floor(xmax[ok] + eps).astype(np.int64), cols - 1)
+    row = row[ok]
+    keep = x0 <= x1
+    row, x0, x1 = row[keep], x0[keep], x1[keep]
+    width = cols + 1
+    diff = np.bincount(row * width + x0, minlength=rows * width)
+    diff -= np.bincount(row * width + x1 + 1, minlength=rows * width)
+    return np.cumsum(diff.reshape(rows, width), axis=1)[:, :cols] > 0
+
+
+def rasterize_footprint(
+    uv: np.ndarray, F: np.ndarray, *, resolution: int, eps: float = _CHECK_EPS
+) -> np.ndarray:
+    """Conservative footprint of one chart on a ``resolution x resolution`` texture.
+
+    Parameters
+    ----------
+    uv : (n, 2) float ndarray
+        Chart coordinates in the unit square (parts outside are clipped).
+    F : (m, 3) int ndarray
+        Triangles, indices into `uv`.
+    resolution : int
+        Texels per side.
+    eps : float
+        Tolerance in texels: a texel closer than `eps` to a triangle counts as touched.
+
+    Returns
+    -------
+    mask : (resolution, resolution) bool ndarray
+        ``mask[i, j]`` is True when a triangle touches texel ``[j, j+1] x [i, i+1] /
+        resolution`` (row index along v).
+    """
+    uv = np.asarray(uv, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
+    return _raster_kernel(uv * resolution, F, (resolution, resolution), eps)
+
+
+def _dilate(mask: np.ndarray, radius: int) -> np.ndarray:
+    """Square (Chebyshev) dilation by `radius` texels; the result grows by radius per side."""
+    if radius == 0:
+        return mask.copy()
+    padded = np.pad(mask, radius)
+    return maximum_filter(padded, size=2 * radius + 1, mode="constant", cval=False)
+
+
+def footprint_conflicts(
+    uvs: Sequence[np.ndarray],
+    faces: Sequence[np.ndarray],
+    *,
+    resolution: int,
+    padding: int = 0,
+) -> int:
+    """Count the texels that break the padding rule of a packed atlas.
+
+    A footprint texel of a chart is counted when it lies within `padding` texels (Chebyshev
+    distance) of another chart's footprint or of the texture's border, or outside the texture.
+    With ``padding=0`` this counts texels shared by two charts: a positive count proves that the
+    conservative footprints overlap.
+
+    Parameters
+    ----------
+    uvs : sequence of (n_i, 2) float ndarray
+        Chart coordinates, meant to lie in the unit square.
+    faces : sequence of (m_i, 3) int ndarray
+        Chart triangles.
+    resolution : int
+        Texels per side.
+    padding : int
+        Empty texels required between charts and to the border.
+
+    Returns
+    -------
+    int
+        Number of offending (chart, texel) pairs; 0 for a valid layout.
+    """
+    G, p = int(resolution), int(padding)
+    # a canvas with a margin, so that footprints past the border are still seen
+    m = p + 2
+    size = G + 2 * m
+    count = np.zeros((size, size), dtype=np.int32)
+    windows = []
+    bad = 0
+    for uv, F in zip(uvs, faces, strict=True):
+        P = np.asarray(uv, dtype=np.float64) * G
+        F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
+        outside = (P < 2 - m) | (P > G + m - 2)
+        if np.any(outside):  # far outside the texture: count every vertex, skip the raster
+            bad += int(np.count_nonzero(outside.any(axis=1)))
+            windows.append(None)
+            continue
+        lo = np.floor(P.min(axis=0)).astype(np.int64) - 1
+        hi = np.floor(P.max(axis=0)).astype(np.int64) + 2
+        shape = (int(hi[1] - lo[1]), int(hi[0] - lo[0]))
+        mask = _raster_kernel(P - lo, F, shape, _CHECK_EPS)
+        grown = _dilate(mask, p)
+        r0, c0 = int(lo[1]) + m - p, int(lo[0]) + m - p
+        r0c, c0c = max(r0, 0), max(c0, 0)
+        r1c, c1c = min(r0 + grown.shape[0], size), min(c0 + grown.shape[1], size)
+        count[r0c:r1c, c0c:c1c] += grown[r0c - r0 : r1c - r0, c0c - c0 : c1c - c0]
+        windows.append((mask, grown, r0, c0))
+    allowed = np.zeros((size, size), dtype=bool)
+    allowed[m + p : m + G - p, m + p : m + G - p] = True
+    for w in windows:
+        if w is None:
+            continue
+        mask, grown, r0, c0 = w
+        rows, cols = mask.shape
+        r, c = r0 + p, c0 + p  # the mask's own window, inside the canvas by the margin test
+        others = count[r : r + rows, c : c + cols] - grown[p : p + rows, p : p + cols]
+        inside = allowed[r : r + rows, c : c + cols]
+        bad += int(np.count_nonzero(mask & ((others > 0) | ~inside)))
+    return bad
+
+
+# ----------------------------------------------------------------------------------------------
+# validation and canonical frames
+
+
+def _prepare(
+    uvs: Sequence[np.ndarray], faces: Sequence[np.ndarray], areas3d: ArrayLike
+) -> list[_Chart]:
+    if len(uvs) == 0:
+        raise InvalidMeshError("no charts to pack (empty list)")
+    if len(faces) != len(uvs):
+        raise InvalidMeshError(f"got {len(uvs)} uv arrays but {len(faces)} face arrays")
+    areas = np.asarray(areas3d, dtype=np.float64).reshape(-1)
+    if areas.shape[0] != len(uvs):
+        raise InvalidMeshError(f"got {len(uvs)} charts but {areas.shape[0]} 3-D areas")
+    charts = []
+    for i, (uv, F) in enumerate(zip(uvs, faces, strict=True)):
+        uv = np.asarray(uv, dtype=np.float64)
+        F = np.asarray(F)
+        if uv.ndim != 2 or uv.shape[1] != 2 or uv.shape[0] < 3:
+            raise InvalidMeshError(f"chart {i}: uv must be (n, 2) with n >= 3, got {uv.shape}")
+        if not np.all(np.isfinite(uv)):
+            raise InvalidMeshError(f"chart {i}: uv has non-finite coordinates")
+        if F.ndim != 2 or F.shape[1] != 3 or F.shape[0] == 0:
+            raise InvalidMeshError(f"chart {i}: faces must be (m, 3) with m >= 1, got {F.shape}")
+        if not np.issubdtype(F.dtype, np.integer):
+            raise InvalidMeshError(f"chart {i}: faces must be integers, got dtype {F.dtype}")
+        F = F.astype(np.int64)
+        if F.min() < 0 or F.max() >= uv.shape[0]:
+            raise InvalidMeshError(
+                f"chart {i}: face indices span [{F.min()}, {F.max()}] but uv has {uv.shape[0]} rows"
+            )
+        a3 = float(areas[i])
+        if not np.isfinite(a3) or a3 <= 0:
+            raise InvalidMeshError(f"chart {i} has 3-D area {a3}; every chart needs a positive one")
+        signed = _triangle_areas(uv, F)
+        area_uv = float(np.abs(signed).sum())
+        span = float(np.ptp(uv, axis=0).max())
+        if not area_uv > 1e-14 * span * span:
+            raise InvalidMeshError(
+                f"chart {i} has uv area {area_uv:.3g} (bounding box {span:.3g}); it must be "
+                "mapped to the plane with a positive area"
+            )
+        try:
+            angle = _min_area_angle(uv)
+        except InvalidMeshError as exc:
+            raise InvalidMeshError(f"chart {i}: {exc}") from exc
+        k = np.sqrt(a3 / area_uv)
+        R = _rotation(angle)
+        r = uv @ R.T
+        low = r.min(axis=0)
+        to_q = np.eye(3)
+        to_q[:2, :2] = k * R
+        to_q[:2, 2] = -k * low
+        q = (r - low) * k
+        extent = q.max(axis=0)
+        if signed.sum() < 0:  # keep the kernels' faces counter-clockwise
+            F = F[:, [0, 2, 1]]
+        charts.append(_Chart(i, uv, q, F, extent, to_q, a3))
+    return charts
+
+
+# ----------------------------------------------------------------------------------------------
+# footprints at a given scale
+
+
+def _box(extent: np.ndarray, s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Footprint box size (texels, integers) and the chart's offset that centres it."""
+    w = extent * s
+    n = np.floor(w + 2 * _MARGIN).astype(np.int64) + 1
+    return n, (n - w) / 2
+
+
+def _turn(k: int, cols: int, rows: int) -> np.ndarray:
+    """(3, 3) affine of k counter-clockwise quarter turns of the box [0, cols] x [0, rows]."""
+    k %= 4
+    T = np.eye(3)
+    if k == 1:
+        T[:2] = [[0, -1, rows], [1, 0, 0]]
+    elif k == 2:
+        T[:2] = [[-1, 0, cols], [0, -1, rows]]
+    elif k == 3:
+        T[:2] = [[0, 1, 0], [-1, 0, cols]]
+    return T
+
+
+def _chart_mask(chart: _Chart, s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Footprint (rows, cols) of the chart at scale s, and the (3, 3) map q -> mask texels."""
+    n, off = _box(chart.extent, s)
+    to_tex = np.diag([s, s, 1.0])
+    to_tex[:2, 2] = off
+    P = chart.q * s + off
+    mask = _raster_kernel(P, chart.F, (int(n[1]), int(n[0])), _PACK_EPS)
+    return mask, to_tex
+
+
+# ----------------------------------------------------------------------------------------------
+# raster packer
+
+
+class _Footprint:
+    """A chart's footprint in one orientation, with what the raster packer needs of it."""
+
+    def __init__(self, mask: np.ndarray, block: int) -> None:
+        self.mask = mask
+        rows, cols = mask.shape
+        # texels newly covered by a one-texel move down / left: the lower / left edges
+        below = np.zeros_like(mask)
+        below[1:] = mask[:-1]
+        self.down = np.nonzero(mask & ~below)
+        left = np.zeros_like(mask)
+        left[:, 1:] = mask[:, :-1]
+        self.left = np.nonzero(mask & ~left)
+        crow, ccol = -(-rows // block) * block, -(-cols // block) * block
+        padded = np.zeros((crow, ccol), dtype=bool)
+        padded[:rows, :cols] = mask
+        self.coarse = padded.reshape(crow // block, block, ccol // block, block).any(axis=(1, 3))
+        # the coarse footprint as runs of cells per row: (row, first col, end col)
+        edges = np.diff(self.coarse.astype(np.int8), axis=1, prepend=0, append=0)
+        start_r, start_c = np.nonzero(edges == 1)
+        _, end_c = np.nonzero(edges == -1)
+        self.runs = np.stack([start_r, start_c, end_c], axis=1)
+        widest = int(np.argmax(end_c - start_c))
+        self.widest = (int(start_r[widest]), int(end_c[widest] - start_c[widest]))
+
+
+class _Canvas:
+    """Fine and coarse occupancy grids of the raster packer.
+
+    The canvas is `resolution` texels wide and `height` texels tall (taller than the texture
+    during the scale search, so that an over-full trial still reports how much height it
+    needed). ``forbid[i, j]`` is True where a new footprint texel may not go: the border band
+    (left, right, bottom, and at the canvas top) and the placed footprints dilated by the
+    padding. ``coarse`` is its block-wise "any", on which fitting positions are searched first.
+    """
+
+    def __init__(self, resolution: int, height: int, padding: int) -> None:
+        self.width = resolution
+        self.height = height
+        self.pad = padding
+        b = self.block = max(1, -(-resolution // _COARSE_CELLS))
+        self.nr, self.nc = -(-height // b), -(-resolution // b)
+        self.forbid = np.ones((self.nr * b, self.nc * b), dtype=bool)
+        self.forbid[padding : height - padding, padding : resolution - padding] = False
+        self.coarse = self._pool(self.forbid)
+        self._fhat: np.ndarray | None = None
+        self._floor: dict[tuple, int] = {}
+        # per coarse row: cumulative forbidden counts, and the longest run of free cells
+        self.rowsum = np.zeros((self.nr, self.nc + 1), dtype=np.int32)
+        self.max_free_run = np.zeros(self.nr, dtype=np.int64)
+        self._update_rows(0, self.nr)
+
+    def _pool(self, grid: np.ndarray) -> np.ndarray:
+        b = self.block
+        r, c = grid.shape[0] // b, grid.shape[1] // b
+        return grid.reshape(r, b, c, b).any(axis=(1, 3))
+
+    def _update_rows(self, r0: int, r1: int) -> None:
+        """Refresh the row sums and longest free runs of coarse rows r0 to r1 - 1."""
+        nc = self.nc
+        block = self.coarse[r0:r1]
+        np.cumsum(block, axis=1, out=self.rowsum[r0:r1, 1:])
+        walls = np.ones((r1 - r0, nc + 2), dtype=bool)
+        walls[:, 1:-1] = block
+        rows, cols = np.nonzero(walls)  # row-major: each row's walls in column order
+        gaps = np.diff(cols) - 1
+        gaps[np.diff(rows) != 0] = 0  # no run across two rows
+        starts = np.searchsorted(rows, np.arange(r1 - r0))
+        self.max_free_run[r0:r1] = np.maximum.reduceat(np.append(gaps, 0), starts)
+
+    def fits(self, fp: _Footprint, row: int, col: int) -> bool:
+        r, c = fp.mask.shape
+        if row < 0 or col < 0 or row + r > self.height or col + c > self.width:
+            return False
+        return not np.any(self.forbid[row : row + r, col : col + c] & fp.mask)
+
+    def candidates(self, fp: _Footprint, count: int) -> list[tuple[int, int]]:
+        """Fine positions where the coarse footprint meets no coarse forbidden cell.
+
+        The left-most such position of each of the `count` lowest rows that have one.
+        """
+        nr, nc = self.nr, self.nc
+        cmask = fp.coarse
+        r, c = cmask.shape
+        if r > nr or c > nc:
+            return []
+        b = self.block
+        if len(fp.runs) <= _DIRECT_RUNS:
+            # footprints of few rows: window sums along rows (one per run), band by band from
+            # the lowest row with room, so that small late charts looking for holes stop early.
+            # Forbidden cells only ever grow, so rows that had no room for this same coarse
+            # footprint before still have none.
+            S = self.rowsum
+            key = (cmask.shape, cmask.tobytes())
+            found: list[tuple[int, int]] = []
+            # and a row holds no position whose widest run lacks a free run that long
+            i_w, w_w = fp.widest
+            roomy = np.flatnonzero(self.max_free_run[i_w : nr - r + 1 + i_w] >= w_w)
+            if len(roomy) == 0:
+                return []
+            y = max(int(roomy[0]), self._floor.get(key, 0))
+            width = nc - c + 1
+            while y <= nr - r and len(found) < count:
+                y1 = min(y + _BAND_ROWS, nr - r + 1)
+                hit = np.zeros((y1 - y, width), dtype=bool)
+                for i, a, e in fp.runs:
+                    rows_i = S[y + i : y1 + i]
+                    hit |= rows_i[:, e : e + width] != rows_i[:, a : a + width]
+                free = ~hit
+                rows = np.flatnonzero(free.any(axis=1))[: count - len(found)]
+                cols = free[rows].argmax(axis=1)
+                found += [((y + int(i)) * b, int(j) * b) for i, j in zip(rows, cols, strict=True)]
+                if not found:
+                    self._floor[key] = y1
+                y = y1
+            return found
+        # single precision is plenty: every candidate is checked exactly by `fits`
+        if self._fhat is None:
+            self._fhat = scipy.fft.rfft2(self.coarse.astype(np.float32))
+        mhat = scipy.fft.rfft2(cmask.astype(np.float32), s=(nr, nc))
+        corr = scipy.fft.irfft2(np.conj(mhat) * self._fhat, s=(nr, nc))
+        free = corr[: nr - r + 1, : nc - c + 1] < 0.5
+        rows = np.flatnonzero(free.any(axis=1))[:count]
+        cols = free[rows].argmax(axis=1)
+        return [(int(i) * b, int(j) * b) for i, j in zip(rows, cols, strict=True)]
+
+    def slide(self, fp: _Footprint, row: int, col: int) -> tuple[int, int]:
+        """Move a fitting footprint down, then left, one texel at a time while it fits.
+
+        Only the texels a move newly covers are tested (the footprint's lower or left edges).
+        """
+        forbid = self.forbid
+        dr, dc = fp.down
+        lr, lc = fp.left
+        steps = 0
+        moved = True
+        while moved and steps < _SLIDE_STEPS:
+            moved = False
+            while row > 0 and not forbid[dr + (row - 1), dc + col].any():
+                row -= 1
+                steps += 1
+                moved = True
+            while col > 0 and not forbid[lr + row, lc + (col - 1)].any():
+                col -= 1
+                steps += 1
+                moved = True
+        return row, col
+
+    def place(self, fp: _Footprint, row: int, col: int) -> None:
+        p = self.pad
+        grown = _dilate(fp.mask, p)
+        r0, c0 = row - p, col - p
+        r1, c1 = r0 + grown.shape[0], c0 + grown.shape[1]
+        size = self.forbid.shape[0]
+        cr0, cc0 = max(r0, 0), max(c0, 0)
+        cr1, cc1 = min(r1, size), min(c1, size)
+        self.forbid[cr0:cr1, cc0:cc1] |= grown[cr0 - r0 : cr1 - r0, cc0 - c0 : cc1 - c0]
+        b = self.block
+        br0, bc0 = cr0 // b, cc0 // b
+        br1, bc1 = -(-cr1 // b), -(-cc1 // b)
+        self.coarse[br0:br1, bc0:bc1] = self._pool(
+            self.forbid[br0 * b : br1 * b, bc0 * b : bc1 * b]
+        )
+        self._fhat = None
+        self._update_rows(br0, br1)
+
+
+def _best_position(canvas: _Canvas, fps: list[_Footprint]) -> tuple[int, int, int] | None:
+    """Lowest-top, then left-most fitting position over the orientations: (turns, row, col)."""
+    best: tuple[tuple[int, int, int], tuple[int, int, int]] | None = None
+    for k, fp in enumerate(fps):
+        for row, col in canvas.candidates(fp, _CANDIDATES):
+            if not canvas.fits(fp, row, col):
+                continue
+            row, col = canvas.slide(fp, row, col)
+            key = (row + fp.mask.shape[0], col, k)
+            if best is None or key < best[0]:
+                best = (key, (k, row, col))
+    return None if best is None else best[1]
+
+
+def _raster_trial(
+    charts: list[_Chart], order: np.ndarray, s: float, resolution: int, padding: int, turns: int
+) -> tuple[list[tuple[np.ndarray, int, int, int]] | None, float, int | None]:
+    """Place all charts at scale s on a canvas 12.5% taller than the texture.
+
+    Returns
+    -------
+    placed : list of (q -> texel affine, turns, row, col), or None
+        None if a chart found no room even on the taller canvas.
+    fraction : float
+        Fraction of the total area placed.
+    need : int or None
+        Texture side the layout needs (top-most footprint row + 1 + padding); the layout is
+        valid for the texture when ``need <= resolution``.
+    """
+    canvas = _Canvas(resolution, resolution + resolution // 8, padding)
+    placed: list = [None] * len(charts)
+    total = sum(ch.area for ch in charts)
+    done = 0.0
+    need = 0
+    for i in order:
+        mask, to_tex = _chart_mask(charts[i], s)
+        turned = [np.rot90(mask, -k) for k in range(turns)]
+        # a footprint that a quarter turn maps onto itself needs one search, not two
+        if turns == 2 and np.array_equal(turned[0], turned[1]):
+            turned = turned[:1]
+        fps = [_Footprint(m, canvas.block) for m in turned]
+        found = _best_position(canvas, fps)
+        if found is None:
+            return None, done / total, None
+        k, row, col = found
+        canvas.place(fps[k], row, col)
+        placed[i] = (to_tex, k, row, col)
+        done += charts[i].area
+        need = max(need, row + fps[k].mask.shape[0] + padding)
+    return placed, 1.0, need
+
+
+# ----------------------------------------------------------------------------------------------
+# rectangle packer
+
+
+def _rect_trial(
+    charts: list[_Chart], order: np.ndarray, s: float, resolution: int, padding: int, turns: int
+) -> tuple[list[tuple[np.ndarray, int, int, int]] | None, float, int | None]:
+    """Pack the padded footprint boxes at scale s with rectpack's MaxRects.
+
+    Boxes are ``(cols + padding, rows + padding)`` in a bin of side ``resolution - padding``
+    whose origin is at texel ``(padding, padding)``, which leaves `padding` texels between
+    footprints and to the border. Same return values as `_raster_trial`.
+    """
+    try:
+        import rectpack
+    except ImportError as exc:  # optional dependency, only for this method
+        raise ConfigError(
+            'method="rect" needs the rectpack package (pip install rectpack)'
+        ) from exc
+
+    bin_side = resolution - padding
+    boxes = [_box(ch.extent, s)[0] + padding for ch in charts]
+    total = sum(ch.area for ch in charts)
+    done = 0.0
+    for name in _RECT_ALGOS:
+        packer = rectpack.newPacker(
+            mode=rectpack.PackingMode.Offline,
+            bin_algo=rectpack.PackingBin.BFF,
+            pack_algo=getattr(rectpack, name),
+            sort_algo=rectpack.SORT_NONE,
+            rotation=turns > 1,
+        )
+        packer.add_bin(bin_side, bin_side, count=1)
+        for i in order:
+            packer.add_rect(int(boxes[i][0]), int(boxes[i][1]), rid=int(i))
+        packer.pack()
+        rects = packer.rect_list()
+        if len(rects) != len(charts):
+            done = max(done, sum(charts[r[5]].area for r in rects))
+            continue
+        placed: list = [None] * len(charts)
+        for _, x, y, w, _h, rid in rects:
+            to_tex = np.diag([s, s, 1.0])
+            to_tex[:2, 2] = _box(charts[rid].extent, s)[1]
+            k = 1 if w != boxes[rid][0] else 0
+            placed[rid] = (to_tex, k, int(y) + padding, int(x) + padding)
+        return placed, 1.0, None
+    return None, done / total, None
+
+
+# ----------------------------------------------------------------------------------------------
+# driver
+
+
+def _scale_bounds(charts: list[_Chart], resolution: int, padding: int) -> float:
+    inner = resolution - 2 * padding
+    total = sum(ch.area for ch in charts)
+    longest = max(float(ch.extent.max()) for ch in charts)
+    by_area = inner / np.sqrt(total)
+    by_side = max(inner - 2 * _MARGIN, 1e-9) / longest
+    return float(min(by_area, by_side))
+
+
+def pack_charts(
+    uvs: Sequence[np.ndarray],
+    faces: Sequence[np.ndarray],
+    areas3d: ArrayLike,
+    *,
+    config: PackConfig | None = None,
+) -> PackResult:
+    """Scale, rotate and pack charts into the unit square.
+
+    Parameters
+    ----------
+    uvs : sequence of (n_i, 2) float ndarray
+        Per chart, a bijective planar map at any position, scale and rotation.
+    faces : sequence of (m_i, 3) int ndarray
+        Per chart, triangles indexing its `uvs` rows.
+    areas3d : (n_charts,) float array_like
+        Per chart, the 3-D surface area; every chart's packed uv area is proportional to it.
+    config : PackConfig, optional
+        Options; defaults to ``PackConfig()``.
+
+    Returns
+    -------
+    PackResult
+        Packed coordinates, the per-chart affine maps, the global scale and the utilization.
+
+    Raises
+    ------
+    InvalidMeshError
+        If the list is empty, shapes or indices are wrong, a chart has zero (or non-finite)
+        3-D area, or a chart's uv map spans no area.
+    SolverError
+        If no scale lets the charts fit (more charts than the texture has room for at this
+        resolution and padding).
+
+    Notes
+    -----
+    Charts' footprints (texels touched by their closed triangles) at `resolution` end up at
+    Chebyshev distance greater than `padding` from each other, i.e. with at least `padding`
+    empty texels in between, and no footprint texel lies within `padding` texels of the border.
+    The layout is deterministic.
+    """
+    cfg = PackConfig() if config is None else config
+    charts = _prepare(uvs, faces, areas3d)
+    G, p = int(cfg.resolution), int(cfg.padding)
+    turns = 2 if cfg.rotate else 1
+    trial = _raster_trial if cfg.method == "raster" else _rect_trial
+    # largest first; ties by the longer side, then by input order
+    areas = np.array([ch.area for ch in charts])
+    longest = np.array([ch.extent.max() for ch in charts])
+    order = np.lexsort((np.arange(len(charts)), -longest, -areas))
+
+    # Safeguarded secant search on the scale. No scale above `hi` fits. A raster trial runs on
+    # a taller canvas and reports the height it needed, whose ratio to the texture predicts the
+    # scale (areas grow with its square); a failed trial reports the fraction of area it placed.
+    # Guesses outside the bracket's interior are replaced by bisection.
+    hi = _scale_bounds(charts, G, p)
+    lo, best = 0.0, None
+    s = _FIRST_GUESS * hi
+    n_trials = 0
+    for n_trials in range(1, _MAX_SHRINK + 1):  # noqa: B007
+        placed, fraction, need = trial(charts, order, s, G, p, turns)
+        ok = placed is not None and (need is None or need <= G)
+        logger.debug("pack trial %d: scale %.6g need %s -> %s", n_trials, s, need, ok)
+        if ok:
+            lo, best = s, placed
+        else:
+            hi = s
+        if best is not None and (hi / lo <= 1 + _SCALE_TOL or n_trials >= _MAX_TRIALS):
+            break
+        if placed is None:
+            guess = s * float(np.clip(np.sqrt(fraction), 0.5, 0.97))
+        elif need is not None:
+            guess = s * float(np.sqrt((G - 2 * p) / max(need - 2 * p, 1)))
+        else:
+            guess = np.sqrt(lo * hi)
+        if lo > 0:
+            if not lo * (1 + _SCALE_TOL / 2) <= guess <= hi / (1 + _SCALE_TOL / 2):
+                guess = np.sqrt(lo * hi)
+        else:
+            guess = min(guess, 0.97 * hi)
+        s = float(guess)
+    if best is None:
+        raise SolverError(
+            f"{len(charts)} charts do not fit a {G}x{G} texture with padding {p} at any scale "
+            f"down to {s:.3g} texels per unit length"
+        )
+    best_s = lo
+    return _finish(charts, best, best_s, G, p, n_trials, cfg.method)
+
+
+def _finish(
+    charts: list[_Chart],
+    placed: list[tuple[np.ndarray, int, int, int]],
+    s: float,
+    G: int,
+    p: int,
+    n_trials: int,
+    method: str,
+) -> PackResult:
+    out_uvs = []
+    transforms = np.empty((len(charts), 2, 3))
+    area = 0.0
+    for ch, (to_tex, k, row, col) in zip(charts, placed, strict=True):
+        n, _ = _box(ch.extent, s)
+        M = _turn(k, int(n[0]), int(n[1])) @ to_tex @ ch.to_q
+        M[:2, 2] += (col, row)
+        M[:2] /= G
+        transforms[ch.index] = M[:2]
+        uv = ch.uv @ M[:2, :2].T + M[:2, 2]
+        out_uvs.append(uv)
+        area += float(np.abs(_triangle_areas(uv, ch.F)).sum())
+    logger.info(
+        "packed %d charts (%s) at %dx%d, padding %d: utilization %.4f after %d trials",
+        len(charts),
+        method,
+        G,
+        G,
+        p,
+        area,
+        n_trials,
+    )
+    return PackResult(
+        uvs=tuple(out_uvs),
+        scale=s / G,
+        transforms=transforms,
+        utilization=area,
+        resolution=G,
+        padding=p,
+    )
