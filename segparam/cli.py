@@ -28,7 +28,7 @@ DEFAULT_CHART_NAME = "brain_parcel.obj"
 
 
 def _cmd_chart(args: argparse.Namespace) -> int:
-    from .io import load_mesh, save_uv_png, write_obj
+    from .io import load_mesh, render_uv_layout, save_png, write_obj
     from .parameterize import parameterize_chart
 
     source = Path(args.input) if args.input else _data(DEFAULT_CHART_NAME)
@@ -39,7 +39,7 @@ def _cmd_chart(args: argparse.Namespace) -> int:
     uv = uv / max(float(uv.max()), 1e-300)  # into the unit square, aspect kept
     write_obj(out, V, F, uv=uv)
     png = out.with_name(out.stem + "_uv.png")
-    save_uv_png(png, uv, F)
+    save_png(png, render_uv_layout(uv, F))
     if not args.quiet:
         q = chart.quality
         print(f"{source.name}: {len(V)} vertices, {len(F)} faces, method {chart.method}")
@@ -54,6 +54,205 @@ def _cmd_chart(args: argparse.Namespace) -> int:
         )
         print(f"  wrote {out} and {png}")
     return 0
+
+
+DEFAULT_MESH_NAME = "brain.obj"
+
+
+def _resolve_config(value: str | None):
+    """``--config``: a TOML path, or the name of a bundled pipeline (``default``, ``brain``...)."""
+    from importlib.resources import files
+
+    from .errors import ConfigError
+    from .pipeline import PipelineConfig, load_config
+
+    if value is None:
+        return PipelineConfig()
+    path = Path(value)
+    if path.suffix != ".toml" and not path.exists():
+        bundled = Path(str(files("segparam.pipelines").joinpath(f"{value}.toml")))
+        if not bundled.exists():
+            names = sorted(p.stem for p in bundled.parent.glob("*.toml"))
+            raise ConfigError(f"no pipeline named {value!r}; bundled: {', '.join(names)}")
+        path = bundled
+    return load_config(path)
+
+
+def _config_from_args(args: argparse.Namespace):
+    """The pipeline config: ``--config`` (file or bundled name), then command-line overrides."""
+    config = _resolve_config(getattr(args, "config", None))
+    overrides: dict[str, dict] = {"pack": {}, "remesh": {}, "segment": {}, "split": {}}
+    if getattr(args, "resolution", None) is not None:
+        overrides["pack"]["resolution"] = args.resolution
+    if getattr(args, "padding", None) is not None:
+        overrides["pack"]["padding"] = args.padding
+    if getattr(args, "no_remesh", False):
+        overrides["remesh"]["mode"] = "off"
+    elif getattr(args, "remesh", None) is not None:
+        overrides["remesh"]["mode"] = args.remesh
+    if getattr(args, "max_charts", None) is not None:
+        overrides["segment"]["max_charts"] = args.max_charts
+    if getattr(args, "max_distortion", None) is not None:
+        overrides["split"]["max_distortion"] = args.max_distortion
+    return config.replace(**{k: v for k, v in overrides.items() if v})
+
+
+def _cmd_remesh(args: argparse.Namespace) -> int:
+    from .artifacts import save_stage
+    from .clean import clean
+    from .io import load_mesh
+    from .remesh import remesh
+
+    config = _config_from_args(args)
+    V, F = load_mesh(args.input)
+    cleaned = clean(V, F)
+    result = remesh(cleaned.V, cleaned.F, config=config.remesh)
+    info = {
+        "stage": "remesh",
+        "input": str(args.input),
+        "cleaning": cleaned.summary(),
+        "remeshing": {"remeshed": result.remeshed, "reason": result.reason},
+    }
+    out = save_stage(args.output, {"V": result.V, "F": result.F}, info)
+    if not args.quiet:
+        print(f"{len(result.F)} faces ({result.reason}); wrote {out}")
+    return 0
+
+
+def _cmd_segment(args: argparse.Namespace) -> int:
+    from .artifacts import load_stage, save_stage
+    from .segment import segment
+
+    config = _config_from_args(args)
+    a = load_stage(args.input, needs=("V", "F"))
+    seg = segment(a["V"], a["F"], config=config.segment, seed=args.seed)
+    info = {"stage": "segment", "charts": seg.n_charts, "curvature": seg.curvature}
+    out = save_stage(args.output, {"V": a["V"], "F": a["F"], "labels": seg.labels}, info)
+    if not args.quiet:
+        print(f"{seg.n_charts} charts; wrote {out}")
+    return 0
+
+
+def _cmd_parameterize(args: argparse.Namespace) -> int:
+    from .artifacts import charts_to_arrays, load_stage, save_stage
+    from .split import parameterize_charts
+
+    config = _config_from_args(args)
+    a = load_stage(args.input, needs=("V", "F", "labels"))
+    cs = parameterize_charts(a["V"], a["F"], a["labels"], config=config.split, seed=args.seed)
+    info = {
+        "stage": "parameterize",
+        "charts": len(cs.charts),
+        "first_pass_bijective": int(cs.first_pass_bijective.sum()),
+        "splits": int(cs.splits.sum()),
+    }
+    arrays = {"V": a["V"], "F": a["F"], **charts_to_arrays(cs)}
+    out = save_stage(args.output, arrays, info)
+    if not args.quiet:
+        print(f"{len(cs.charts)} bijective charts ({info['splits']} splits); wrote {out}")
+    return 0
+
+
+def _cmd_pack(args: argparse.Namespace) -> int:
+    from .artifacts import charts_from_arrays, load_stage
+    from .pipeline import pack_atlas
+
+    config = _config_from_args(args)
+    a = load_stage(args.input, needs=("V", "F", "chart_faces", "chart_uv"))
+    charts = charts_from_arrays(a["V"], a)
+    atlas = pack_atlas(a["V"], a["F"], charts, config=config, seed=args.seed)
+    stem = Path(args.input).stem
+    written = atlas.save(args.output, stem=stem)
+    if not args.quiet:
+        print(f"{atlas.n_charts} charts, utilization {atlas.packing.utilization:.3f}; ", end="")
+        print(f"wrote {len(written)} files to {args.output}/")
+    return 0
+
+
+def _cmd_atlas(args: argparse.Namespace) -> int:
+    import time
+
+    from .io import load_mesh
+    from .pipeline import build_atlas
+
+    source = Path(args.input) if args.input else _data(DEFAULT_MESH_NAME)
+    outdir = Path(args.output) if args.output else Path(f"{source.stem}_atlas")
+    if outdir.exists() and not outdir.is_dir():
+        from .errors import SegparamError
+
+        raise SegparamError(f"{outdir}: exists and is not a folder")
+    config = _config_from_args(args)
+    t0 = time.perf_counter()
+    V, F = load_mesh(source)
+    bar = _progress_bar(args.quiet)
+    try:
+        atlas = build_atlas(V, F, config, seed=args.seed, progress=bar.update if bar else None)
+    finally:
+        if bar:
+            bar.close()
+    stem = source.name[: -len(".gii.gz")] if source.name.endswith(".gii.gz") else source.stem
+    written = atlas.save(outdir, stem=stem)
+    if not args.quiet:
+        r = atlas.report()
+        a = r["atlas"]
+        c = r["cleaning"]
+        print(f"{source.name}: {r['input']['faces']} faces in, {a['faces']} charted", end="")
+        print(f" ({'remeshed' if r['remeshing']['remeshed'] else 'not remeshed'}:", end="")
+        print(f" {r['remeshing']['reason']})")
+        removed = c.get("removed_faces", 0)
+        if removed:
+            print(f"  cleaning removed {removed} faces (listed in report.json)")
+        seg = r["segmentation"]
+        print(
+            f"  charts {a['charts']} (segmentation {seg['charts']}, "
+            f"{seg['first_pass_bijective']} bijective on the first pass)"
+        )
+        print(
+            f"  bijective charts {a['bijective_charts']}/{a['charts']}  flipped triangles "
+            f"{a['flipped_triangles']}  utilization {a['utilization']:.3f}"
+        )
+        print(
+            f"  angle distortion {a['angle_distortion']:.3f}  L2 stretch {a['l2_stretch']:.3f}  "
+            f"area distortion {a['area_distortion']:.3f}"
+        )
+        times = "  ".join(f"{k} {v:.1f}s" for k, v in atlas.timings.items())
+        print(f"  time {time.perf_counter() - t0:.1f}s: {times}")
+        print(f"  wrote {len(written)} files to {outdir}/")
+    return 0
+
+
+class _StageBar:
+    """A tqdm bar per stage (and per chart while parameterizing), on stderr."""
+
+    def __init__(self) -> None:
+        from tqdm import tqdm
+
+        self._tqdm = tqdm
+        self._bar = None
+        self._stage = None
+
+    def update(self, stage: str, done: int, total: int) -> None:
+        if stage != self._stage:
+            self.close()
+            self._stage = stage
+            self._bar = self._tqdm(
+                total=total,
+                desc=f"{stage:>12}",
+                unit="chart" if total > 1 else "stage",
+                leave=False,
+                file=sys.stderr,
+            )
+        self._bar.n = done
+        self._bar.refresh()
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None
+
+
+def _progress_bar(quiet: bool) -> _StageBar | None:
+    return None if quiet or not sys.stderr.isatty() else _StageBar()
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -73,6 +272,63 @@ def build_parser() -> argparse.ArgumentParser:
     chart.add_argument("--seed", type=int, default=0)
     chart.add_argument("--quiet", action="store_true", help="print nothing on success")
     chart.set_defaults(func=_cmd_chart)
+
+    atlas = sub.add_parser("atlas", help="mesh file -> packed UV atlas (OBJ, GLB, PNGs, report)")
+    atlas.add_argument(
+        "input", nargs="?", help=f"mesh file (default: the sample {DEFAULT_MESH_NAME})"
+    )
+    atlas.add_argument("-o", "--output", help="output folder (default: ./<input stem>_atlas)")
+    atlas.add_argument(
+        "--config", help="pipeline TOML file, or a bundled name: default, brain, fast"
+    )
+    atlas.add_argument("--resolution", type=int, help="texture size in texels (default 1024)")
+    atlas.add_argument("--padding", type=int, help="texels between charts and at the border (2)")
+    atlas.add_argument("--remesh", choices=["auto", "on", "off"], help="remeshing policy (auto)")
+    atlas.add_argument("--no-remesh", action="store_true", help="keep the input's vertices")
+    atlas.add_argument("--max-charts", type=int, help="most charts from the segmentation")
+    atlas.add_argument("--max-distortion", type=float, help="split charts above this s1/s2")
+    atlas.add_argument("--seed", type=int, default=0)
+    atlas.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
+    atlas.set_defaults(func=_cmd_atlas)
+
+    def stage(name: str, help_: str, inp: str, out: str, func, options=()) -> None:
+        p = sub.add_parser(name, help=help_)
+        p.add_argument("input", help=inp)
+        p.add_argument("-o", "--output", required=True, help=out)
+        p.add_argument("--config", help="pipeline TOML file, or a bundled name")
+        p.add_argument("--seed", type=int, default=0)
+        p.add_argument("--quiet", action="store_true")
+        for flag, kwargs in options:
+            p.add_argument(flag, **kwargs)
+        p.set_defaults(func=func)
+
+    stage(
+        "remesh",
+        "stage 1-2: load, clean and remesh a mesh file -> OUT.npz + OUT.json",
+        "mesh file",
+        "artifact (.npz)",
+        _cmd_remesh,
+        [("--remesh", {"choices": ["auto", "on", "off"]})],
+    )
+    stage(
+        "segment", "stage 3: charts of a remesh artifact", "remesh .npz", "artifact", _cmd_segment
+    )
+    stage(
+        "parameterize",
+        "stage 4-5: map every chart bijectively (split + retry)",
+        "segment .npz",
+        "artifact (.npz)",
+        _cmd_parameterize,
+        [("--max-distortion", {"type": float})],
+    )
+    stage(
+        "pack",
+        "stage 6-7: pack the charts and write the atlas files",
+        "parameterize .npz",
+        "output folder",
+        _cmd_pack,
+        [("--resolution", {"type": int}), ("--padding", {"type": int})],
+    )
     return parser
 
 

@@ -21,7 +21,16 @@ from .errors import MeshFileError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["atomic_path", "load_mesh", "save_uv_png", "write_obj", "SUPPORTED_SUFFIXES"]
+__all__ = [
+    "SUPPORTED_SUFFIXES",
+    "atomic_path",
+    "checker_image",
+    "load_mesh",
+    "render_uv_layout",
+    "save_atlas",
+    "save_png",
+    "write_obj",
+]
 
 SUPPORTED_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf", ".gii", ".gii.gz")
 
@@ -187,41 +196,149 @@ def _rows(tag: str, A: np.ndarray, fmt: str, sep: tuple[str, str] | None = None)
     return buf.getvalue()
 
 
-def save_uv_png(
-    path: str | os.PathLike,
+def _palette(k: int) -> np.ndarray:
+    """``k`` distinct, reproducible light colours (golden-ratio hues), uint8 (k, 3)."""
+    import colorsys
+
+    hues = (np.arange(k) * 0.618033988749895) % 1.0
+    return np.array([colorsys.hsv_to_rgb(h, 0.45, 0.95) for h in hues]) * 255  # loop over charts
+
+
+def render_uv_layout(
     uv: np.ndarray,
     F: np.ndarray,
     *,
+    labels: np.ndarray | None = None,
     size: int = 1024,
-    face_colors: np.ndarray | None = None,
-    edges: bool = True,
-) -> None:
-    """Draw a uv layout (triangles filled, optionally outlined) into a PNG, atomically.
+    outline: bool = True,
+):
+    """Picture of a uv layout in the unit square: charts filled in distinct colours, outlined.
+
+    Triangles are rasterized chart by chart with the packer's conservative rasterizer (no
+    per-triangle drawing calls); each chart's boundary loops are drawn as polylines.
 
     Parameters
     ----------
     uv : (k, 2) float ndarray
-        Coordinates; the drawing fits their bounding box (the unit square if they lie in it).
+        Coordinates in ``[0, 1]^2``.
     F : (m, 3) int ndarray
         Triangles into ``uv``.
-    face_colors : (m, 3) uint8 ndarray, optional
-        Fill colour per triangle; default light grey.
+    labels : (m,) int ndarray, optional
+        Chart of each face (default: one chart).
+
+    Returns
+    -------
+    PIL.Image.Image
     """
     from PIL import Image, ImageDraw
 
-    lo = np.minimum(uv.min(axis=0), 0.0) if uv.min() >= -1e-9 else uv.min(axis=0)
-    hi = np.maximum(uv.max(axis=0), 1.0) if uv.max() <= 1 + 1e-9 else uv.max(axis=0)
-    span = float((hi - lo).max()) or 1.0
-    P = (uv - lo) / span * (size - 1)
-    P[:, 1] = size - 1 - P[:, 1]  # image rows grow downwards
-    img = Image.new("RGB", (size, size), (255, 255, 255))
-    draw = ImageDraw.Draw(img)
-    colors = (
-        np.full((len(F), 3), 200, dtype=np.uint8) if face_colors is None else face_colors
-    ).tolist()
-    outline = (60, 60, 60) if edges and len(F) < 200_000 else None
-    tris = P[F].tolist()
-    for tri, color in zip(tris, colors, strict=True):  # PIL draws one polygon per call
-        draw.polygon([tuple(p) for p in tri], fill=tuple(color), outline=outline)
+    from .mesh import boundary_loops
+    from .pack import rasterize_footprint
+
+    labels = np.zeros(len(F), dtype=np.int64) if labels is None else np.asarray(labels)
+    n = int(labels.max()) + 1
+    colors = _palette(n).astype(np.uint8)
+    img = np.full((size, size, 3), 255, dtype=np.uint8)
+    order = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[order], np.arange(n + 1))
+    groups = [order[bounds[k] : bounds[k + 1]] for k in range(n)]
+    for k, faces in enumerate(groups):  # loop over charts
+        img[rasterize_footprint(uv, F[faces], resolution=size, eps=0.0)] = colors[k]
+    image = Image.fromarray(img[::-1])  # row 0 of the mask is v = 0: flip so v grows upwards
+    if outline:
+        draw = ImageDraw.Draw(image)
+        P = uv * size
+        P[:, 1] = size - P[:, 1]
+        for faces in groups:  # loop over charts, then over their few boundary loops
+            for loop in boundary_loops(F[faces]):
+                pts = P[np.r_[loop, loop[:1]]]
+                draw.line(list(map(tuple, pts.tolist())), fill=(40, 40, 40), width=1)
+    return image
+
+
+def checker_image(size: int = 1024, squares: int = 16):
+    """A checkerboard texture with a colour ramp (so flips and rotations show), PIL image."""
+    from PIL import Image
+
+    i, j = np.meshgrid(np.arange(size), np.arange(size), indexing="ij")
+    cell = size // squares
+    dark = ((i // cell + j // cell) % 2).astype(bool)
+    img = np.empty((size, size, 3), dtype=np.uint8)
+    img[..., 0] = (80 + 150 * j / size).astype(np.uint8)
+    img[..., 1] = (80 + 150 * (1 - i / size)).astype(np.uint8)
+    img[..., 2] = 200
+    img[dark] = (img[dark] * 0.35).astype(np.uint8)
+    return Image.fromarray(img)
+
+
+def save_png(path: str | os.PathLike, image) -> None:
+    """Save a PIL image as PNG atomically."""
     with atomic_path(path) as tmp:
-        img.save(tmp, format="PNG")
+        image.save(tmp, format="PNG")
+
+
+def save_atlas(atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: int | None = None):
+    """Write an atlas into ``outdir``: ``<stem>.obj/.mtl/_checker.png``, ``<stem>.glb``,
+    ``<stem>_uv.png`` and ``report.json``.
+
+    Every file is first written into a staging folder inside ``outdir`` and moved into place only
+    when all of them were written, so a failure leaves no partial output.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
+    import json
+    import shutil
+
+    import trimesh
+
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    size = size or atlas.packing.resolution
+    stage = Path(tempfile.mkdtemp(prefix=".segparam-", dir=outdir))
+    try:
+        names = {
+            "obj": f"{stem}.obj",
+            "mtl": f"{stem}.mtl",
+            "checker": f"{stem}_checker.png",
+            "glb": f"{stem}.glb",
+            "uv": f"{stem}_uv.png",
+            "report": "report.json",
+        }
+        checker = checker_image(1024)
+        checker.save(stage / names["checker"], format="PNG")
+        (stage / names["mtl"]).write_text(
+            f"# written by segparam\nnewmtl atlas\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\n"
+            f"map_Kd {names['checker']}\n",
+            encoding="utf-8",
+        )
+        write_obj(
+            stage / names["obj"],
+            atlas.V,
+            atlas.F,
+            uv=atlas.uv,
+            uv_faces=atlas.uv_F,
+            mtl=names["mtl"],
+        )
+        mesh = trimesh.Trimesh(
+            vertices=atlas.V[atlas.uv_vertex],
+            faces=atlas.uv_F,
+            visual=trimesh.visual.TextureVisuals(uv=atlas.uv, image=checker),
+            process=False,
+        )
+        (stage / names["glb"]).write_bytes(mesh.export(file_type="glb"))
+        render_uv_layout(atlas.uv, atlas.uv_F, labels=atlas.chart_of_face, size=size).save(
+            stage / names["uv"], format="PNG"
+        )
+        (stage / names["report"]).write_text(
+            json.dumps(atlas.report(), indent=1, sort_keys=False) + "\n", encoding="utf-8"
+        )
+        written = []
+        for name in names.values():  # all files exist: move them into place
+            os.replace(stage / name, outdir / name)
+            written.append(outdir / name)
+        return written
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)

@@ -235,11 +235,15 @@ def neighbourhoods(
     return ptr, cols_a[order]
 
 
-def _groups(ptr: np.ndarray, idx: np.ndarray):
-    """Yield ``(rows, N)`` for each neighbourhood size ``k``: ``N`` is ``(g, k)``, self first."""
-    sizes = np.diff(ptr)
+def _groups(ptr: np.ndarray, idx: np.ndarray, subset: np.ndarray | None = None):
+    """Yield ``(rows, N)`` for each neighbourhood size ``k``: ``N`` is ``(g, k)``, self first.
+
+    ``subset`` restricts the rows to those vertices.
+    """
+    subset = np.arange(len(ptr) - 1) if subset is None else subset
+    sizes = ptr[subset + 1] - ptr[subset]
     for k in np.unique(sizes):
-        rows = np.flatnonzero(sizes == k)
+        rows = subset[sizes == k]
         yield rows, idx[ptr[rows][:, None] + np.arange(k)]
 
 
@@ -253,17 +257,23 @@ def _design(V, N, b1, b2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def fit_conditioning(
-    V: np.ndarray, ptr: np.ndarray, idx: np.ndarray, b1: np.ndarray, b2: np.ndarray
+    V: np.ndarray,
+    ptr: np.ndarray,
+    idx: np.ndarray,
+    b1: np.ndarray,
+    b2: np.ndarray,
+    subset: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Reciprocal condition number of every vertex's quadratic fit (sec. 3.2).
+    """Reciprocal condition number of each vertex's quadratic fit (sec. 3.2).
 
     Returns
     -------
     (n,) float64 ndarray
-        ``sigma_min / sigma_max`` of the normalized design ``[u^2, uv, v^2, u, v, 1]``.
+        ``sigma_min / sigma_max`` of the normalized design ``[u^2, uv, v^2, u, v, 1]``; NaN for
+        vertices outside ``subset``.
     """
-    out = np.empty(len(V))
-    for rows, N in _groups(ptr, idx):
+    out = np.full(len(V), np.nan)
+    for rows, N in _groups(ptr, idx, subset):
         u, v, _ = _design(V, N, b1[rows], b2[rows])
         P = np.stack([u * u, u * v, v * v, u, v, np.ones_like(u)], axis=2)
         lam = np.linalg.eigvalsh(P.transpose(0, 2, 1) @ P)
@@ -425,13 +435,15 @@ def hessian_matrix(
         Symmetric positive semi-definite; ``K @ 1 = 0``.
     """
     extra = np.zeros(len(V), dtype=np.int64)
+    check = None  # vertices whose neighbourhood changed: all of them at first
     for _ in range(MAX_EXTEND + 1):
         ptr, idx = neighbourhoods(V, F, min_points=min_points, extra=extra)
         b1, b2 = tangent_frames(V, F, ptr, idx, tangent=tangent)
-        bad = fit_conditioning(V, ptr, idx, b1, b2) < min_rcond
+        bad = fit_conditioning(V, ptr, idx, b1, b2, check) < min_rcond
         if not bad.any():
             break
         extra[bad] += 1
+        check = np.flatnonzero(bad)
     w = vertex_weights(V, F)
     blocks = []
     for rows, N in _groups(ptr, idx):
@@ -577,15 +589,23 @@ def arap_refine(
     w = np.repeat(face_areas(V, F), 2)
     L = (D.T @ sp.diags(w) @ D).tocsc()
     free = np.arange(1, len(V))  # vertex 0 is pinned: the energy ignores translations
-    lu = spla.splu(L[free][:, free].tocsc())
+    lu = spla.splu(
+        L[free][:, free].tocsc(),
+        permc_spec="MMD_AT_PLUS_A",
+        diag_pivot_thresh=0.0,
+        options={"SymmetricMode": True},
+    )
     uv = uv - uv[0]
     for _ in range(iterations):
-        J = (D @ uv).reshape(-1, 2, 2).transpose(0, 2, 1)  # J[t][c, k]
-        U, _, Vt = np.linalg.svd(J)
-        det = np.sign(np.linalg.det(U @ Vt))
-        U[:, :, 1] *= det[:, None]
-        R = U @ Vt
-        rhs = D.T @ (w[:, None] * R.transpose(0, 2, 1).reshape(-1, 2))
+        G = (D @ uv).reshape(-1, 2, 2)  # G[t][k, c] = J_t[c, k]
+        # Closest rotation [[p, -q], [q, p]] to J = [[a, b], [c, d]]: (p, q) ~ (a + d, c - b).
+        p = G[:, 0, 0] + G[:, 1, 1]
+        q = G[:, 0, 1] - G[:, 1, 0]
+        r = np.hypot(p, q)
+        r[r == 0] = 1.0
+        p, q = p / r, q / r
+        Rt = np.stack([np.stack([p, q], 1), np.stack([-q, p], 1)], 1)  # R^T, rows k
+        rhs = D.T @ (w[:, None] * Rt.reshape(-1, 2))
         uv = np.zeros_like(uv)
         uv[free] = lu.solve(rhs[free])
     return uv

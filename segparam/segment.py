@@ -103,7 +103,7 @@ class Segmentation:
     target_charts : int
         The number of charts asked of the clustering (from the curvature or the config).
     curvature : float
-        Integrated absolute Gaussian curvature (sum of ``|angle defect|``).
+        Integrated absolute Gaussian curvature (sum of ``|angle defect|`` at interior vertices).
     """
 
     labels: np.ndarray
@@ -333,7 +333,10 @@ def segment(
     """
     cfg = config or SegmentConfig()
     m = len(F)
-    curvature = float(np.abs(angle_defect(V, F)).sum())
+    # Gaussian curvature lives at interior vertices; a boundary's turning angle is not curvature.
+    interior = np.ones(len(V), dtype=bool)
+    interior[boundary_edges(F).ravel()] = False
+    curvature = float(np.abs(angle_defect(V, F))[interior].sum())
     if cfg.n_charts is not None:
         target = cfg.n_charts
     else:

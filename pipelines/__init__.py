@@ -1,0 +1,1 @@
+"""Named pipeline configurations (TOML), shipped with segparam; see default.toml for every key."""

@@ -1,0 +1,416 @@
+"""The whole pipeline: clean -> remesh -> segment -> parameterize (split + retry) -> pack.
+
+:func:`build_atlas` runs every stage on numpy arrays and returns an :class:`Atlas`; each stage is
+also a public function of its own module. Configurations are frozen dataclasses gathered in
+:class:`PipelineConfig`, loaded from the TOML files in ``pipelines/``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import __version__
+from .clean import CleanResult, clean
+from .errors import ConfigError, InvalidMeshError
+from .mesh import boundary_edges, face_areas
+from .pack import PackConfig, PackResult, pack_charts
+from .quality import distortion, signed_areas
+from .remesh import RemeshConfig, RemeshResult, remesh
+from .segment import Segmentation, SegmentConfig, segment
+from .split import ChartSet, SplitConfig, parameterize_charts
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+log = logging.getLogger(__name__)
+
+__all__ = [
+    "MAX_FACES",
+    "Atlas",
+    "PipelineConfig",
+    "build_atlas",
+    "config_from_dict",
+    "load_config",
+    "pack_atlas",
+]
+
+#: Largest input accepted (faces): a guard against running out of memory (about 3 KB per face
+#: peak in the stages; 24 GB machines manage ~5M faces).
+MAX_FACES = 5_000_000
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """Every stage's options. Load from TOML with :func:`load_config`."""
+
+    remesh: RemeshConfig = field(default_factory=RemeshConfig)
+    segment: SegmentConfig = field(default_factory=SegmentConfig)
+    split: SplitConfig = field(default_factory=SplitConfig)
+    pack: PackConfig = field(default_factory=PackConfig)
+
+    def as_dict(self) -> dict[str, dict[str, Any]]:
+        """Plain dictionary, one table per stage (the TOML layout)."""
+        return {f.name: dataclasses.asdict(getattr(self, f.name)) for f in dataclasses.fields(self)}
+
+    def replace(self, **sections: dict[str, Any]) -> PipelineConfig:
+        """A copy with some options changed, e.g. ``replace(pack={"resolution": 2048})``."""
+        data = self.as_dict()
+        for name, values in sections.items():
+            if name not in data:
+                raise ConfigError(f"unknown config section [{name}]; known: {', '.join(data)}")
+            data[name].update(values)
+        return config_from_dict(data)
+
+
+_SECTIONS = {
+    "remesh": RemeshConfig,
+    "segment": SegmentConfig,
+    "split": SplitConfig,
+    "pack": PackConfig,
+}
+
+
+def config_from_dict(data: dict[str, Any], *, source: str = "config") -> PipelineConfig:
+    """Build a :class:`PipelineConfig`; unknown sections or keys are a :class:`ConfigError`."""
+    kwargs = {}
+    for name, values in data.items():
+        if name not in _SECTIONS:
+            raise ConfigError(f"{source}: unknown section [{name}]; known: {', '.join(_SECTIONS)}")
+        if not isinstance(values, dict):
+            raise ConfigError(f"{source}: [{name}] must be a table")
+        cls = _SECTIONS[name]
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ConfigError(
+                f"{source}: unknown key {unknown[0]!r} in [{name}]; "
+                f"known: {', '.join(sorted(known))}"
+            )
+        try:
+            kwargs[name] = cls(**values)
+        except ConfigError as exc:
+            raise ConfigError(f"{source}: [{name}] {exc}") from None
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(f"{source}: [{name}] {exc}") from None
+    return PipelineConfig(**kwargs)
+
+
+def load_config(path: str | os.PathLike) -> PipelineConfig:
+    """Read a pipeline TOML file (see ``pipelines/default.toml`` for every key)."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such config file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read ({exc})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: invalid TOML ({exc})") from None
+    return config_from_dict(data, source=str(path))
+
+
+@dataclass(frozen=True)
+class Atlas:
+    """A packed UV atlas of a mesh, with every stage's result.
+
+    Attributes
+    ----------
+    V : (n, 3) float64 ndarray
+        Positions of the mesh that was charted (cleaned; remeshed if the remesh stage ran).
+    F : (m, 3) int64 ndarray
+    uv : (k, 2) float64 ndarray
+        Atlas coordinates in ``[0, 1]^2``, split along seams (one row per chart vertex).
+    uv_F : (m, 3) int64 ndarray
+        Rows of ``uv`` for each face corner.
+    uv_vertex : (k,) int64 ndarray
+        Mesh vertex of each ``uv`` row (``F == uv_vertex[uv_F]``).
+    chart_of_face : (m,) int64 ndarray
+    charts : ChartSet
+    packing : PackResult
+    segmentation, cleaning, remeshing : Segmentation, CleanResult, RemeshResult or None
+        The stage results (None when the atlas was packed from saved charts).
+    timings : dict
+        Seconds per stage.
+    config : PipelineConfig
+    seed : int
+    """
+
+    V: np.ndarray
+    F: np.ndarray
+    uv: np.ndarray
+    uv_F: np.ndarray
+    uv_vertex: np.ndarray
+    chart_of_face: np.ndarray
+    charts: ChartSet
+    packing: PackResult
+    segmentation: Segmentation | None
+    cleaning: CleanResult | None
+    remeshing: RemeshResult | None
+    timings: dict
+    config: PipelineConfig
+    seed: int
+
+    @property
+    def n_charts(self) -> int:
+        return len(self.charts.charts)
+
+    def seam_length(self) -> float:
+        """Total 3-D length of the seams (edges whose two faces have different uv rows)."""
+        B3 = boundary_edges(self.F)
+        Buv = boundary_edges(self.uv_F)
+        cut = float(np.linalg.norm(self.V[B3[:, 0]] - self.V[B3[:, 1]], axis=1).sum())
+        P = self.uv_vertex[Buv]
+        total = float(np.linalg.norm(self.V[P[:, 0]] - self.V[P[:, 1]], axis=1).sum())
+        return (total - cut) / 2  # each seam edge borders two charts
+
+    def report(self) -> dict[str, Any]:
+        """The figures written to ``report.json`` (JSON-ready)."""
+        return build_report(self)
+
+    def save(self, outdir: str | os.PathLike, *, stem: str = "mesh", **kwargs: Any) -> list[Path]:
+        """Write the OBJ/MTL/checker PNG, GLB, uv-layout PNG and ``report.json`` (atomically)."""
+        from .io import save_atlas
+
+        return save_atlas(self, outdir, stem=stem, **kwargs)
+
+
+def _versions() -> dict[str, str]:
+    import importlib.metadata as md
+
+    out = {"segparam": __version__, "python": sys.version.split()[0]}
+    for name in ("numpy", "scipy", "scikit-learn", "pymeshlab", "trimesh"):
+        try:
+            out[name] = md.version(name)
+        except md.PackageNotFoundError:  # pragma: no cover
+            out[name] = "missing"
+    return out
+
+
+def _clean_json(value: Any) -> Any:
+    """Floats that JSON cannot hold (inf, nan) become None; numpy scalars become Python ones."""
+    if isinstance(value, dict):
+        return {k: _clean_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean_json(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
+def build_report(atlas: Atlas) -> dict[str, Any]:
+    """Per-chart and global figures of an atlas (see the README's "Outputs")."""
+    V, F = atlas.V, atlas.F
+    area = face_areas(V, F)
+    charts = []
+    for k, c in enumerate(atlas.charts.charts):
+        q = c.quality
+        charts.append(
+            {
+                "chart": k,
+                "faces": int(len(c.faces)),
+                "area": float(area[c.faces].sum()),
+                "source_chart": int(c.source),
+                "depth": int(c.depth),
+                "splits_of_source": int(atlas.charts.splits[c.source]),
+                "method": c.method,
+                "bijective": bool(q.bijective),
+                "flipped": int(q.n_flipped),
+                "l2_stretch": q.l2_stretch,
+                "linf_stretch": q.linf_stretch,
+                "angle_distortion": q.angle_distortion,
+                "area_distortion": q.area_distortion,
+                "symmetric_dirichlet": q.symmetric_dirichlet,
+            }
+        )
+    flipped = int((signed_areas(atlas.uv, atlas.uv_F) <= 0).sum())
+    total_area = float(area.sum())
+    report = {
+        "segparam": _versions(),
+        "seed": atlas.seed,
+        "settings": atlas.config.as_dict(),
+        "timings": atlas.timings,
+        "input": None
+        if atlas.cleaning is None
+        else {"vertices": atlas.cleaning.input_vertices, "faces": atlas.cleaning.input_faces},
+        "cleaning": None if atlas.cleaning is None else atlas.cleaning.summary(),
+        "remeshing": None
+        if atlas.remeshing is None
+        else {
+            "remeshed": atlas.remeshing.remeshed,
+            "reason": atlas.remeshing.reason,
+            "target_edge": atlas.remeshing.target_edge,
+            "vertices": int(len(V)),
+            "faces": int(len(F)),
+        },
+        "segmentation": {
+            "charts": len(atlas.charts.splits),
+            "target_charts": None
+            if atlas.segmentation is None
+            else atlas.segmentation.target_charts,
+            "curvature": None if atlas.segmentation is None else atlas.segmentation.curvature,
+            "first_pass_bijective": int(atlas.charts.first_pass_bijective.sum()),
+        },
+        "atlas": {
+            "charts": atlas.n_charts,
+            "faces": int(len(F)),
+            "flipped_triangles": flipped,
+            "bijective_charts": int(sum(c.quality.bijective for c in atlas.charts.charts)),
+            "utilization": atlas.packing.utilization,
+            "resolution": atlas.packing.resolution,
+            "padding": atlas.packing.padding,
+            "seam_length_over_sqrt_area": atlas.seam_length() / np.sqrt(total_area),
+            **distortion(V[atlas.uv_vertex], atlas.uv_F, atlas.uv),
+        },
+        "charts": charts,
+    }
+    return _clean_json(report)
+
+
+def build_atlas(
+    V,
+    F,
+    config: PipelineConfig | None = None,
+    *,
+    seed: int = 0,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> Atlas:
+    """Run every stage and pack the charts into one atlas.
+
+    Parameters
+    ----------
+    V : (n, 3) array_like of float
+    F : (m, 3) array_like of int
+        Any triangle mesh (it is cleaned first; defects are repaired or reported).
+    config : PipelineConfig, optional
+    seed : int
+        The one source of randomness: the same input, config and seed give the same atlas.
+    progress : callable, optional
+        ``progress(stage, done, total)``, called as stages and charts finish.
+
+    Returns
+    -------
+    Atlas
+
+    Raises
+    ------
+    InvalidMeshError
+        On input that cannot be made into a mesh (see :func:`segparam.clean.clean`), or more
+        than :data:`MAX_FACES` faces.
+    """
+    cfg = config or PipelineConfig()
+    report = progress or (lambda stage, done, total: None)
+    F_arr = np.asarray(F)
+    if F_arr.ndim == 2 and len(F_arr) > MAX_FACES:
+        raise InvalidMeshError(
+            f"mesh has {len(F_arr)} faces; the limit is {MAX_FACES} (about 3 KB of memory per face)"
+        )
+    timings: dict[str, float] = {}
+
+    t = time.perf_counter()
+    cleaned = clean(V, F)
+    timings["clean"] = time.perf_counter() - t
+    report("clean", 1, 1)
+
+    t = time.perf_counter()
+    remeshed = remesh(cleaned.V, cleaned.F, config=cfg.remesh)
+    timings["remesh"] = time.perf_counter() - t
+    Vm, Fm = remeshed.V, remeshed.F
+    report("remesh", 1, 1)
+
+    t = time.perf_counter()
+    seg = segment(Vm, Fm, config=cfg.segment, seed=seed)
+    timings["segment"] = time.perf_counter() - t
+    report("segment", 1, 1)
+
+    t = time.perf_counter()
+    chart_set = parameterize_charts(
+        Vm,
+        Fm,
+        seg.labels,
+        config=cfg.split,
+        seed=seed,
+        progress=lambda done: report("parameterize", done, seg.n_charts),
+    )
+    timings["parameterize"] = time.perf_counter() - t
+
+    return pack_atlas(
+        Vm,
+        Fm,
+        chart_set,
+        config=cfg,
+        seed=seed,
+        timings=timings,
+        segmentation=seg,
+        cleaning=cleaned,
+        remeshing=remeshed,
+    )
+
+
+def pack_atlas(
+    V: np.ndarray,
+    F: np.ndarray,
+    chart_set: ChartSet,
+    *,
+    config: PipelineConfig | None = None,
+    seed: int = 0,
+    timings: dict | None = None,
+    segmentation: Segmentation | None = None,
+    cleaning: CleanResult | None = None,
+    remeshing: RemeshResult | None = None,
+) -> Atlas:
+    """Pack a chart set and assemble the :class:`Atlas` (the last stage of :func:`build_atlas`).
+
+    The stage results that produced the charts are optional: they only feed the report.
+    """
+    cfg = config or PipelineConfig()
+    timings = dict(timings or {})
+    t = time.perf_counter()
+    area = face_areas(V, F)
+    charts = chart_set.charts
+    packing = pack_charts(
+        [c.uv for c in charts],
+        [c.local_F for c in charts],
+        [float(area[c.faces].sum()) for c in charts],
+        config=cfg.pack,
+    )
+    timings["pack"] = time.perf_counter() - t
+
+    sizes = np.array([len(c.vertices) for c in charts])
+    offsets = np.r_[0, np.cumsum(sizes)[:-1]]
+    uv = np.concatenate(packing.uvs)
+    uv_vertex = np.concatenate([c.vertices for c in charts])
+    uv_F = np.empty_like(F)
+    chart_of_face = np.empty(len(F), dtype=np.int64)
+    for k, c in enumerate(charts):  # loop over charts
+        uv_F[c.faces] = c.local_F + offsets[k]
+        chart_of_face[c.faces] = k
+    return Atlas(
+        V=V,
+        F=F,
+        uv=uv,
+        uv_F=uv_F,
+        uv_vertex=uv_vertex,
+        chart_of_face=chart_of_face,
+        charts=chart_set,
+        packing=packing,
+        segmentation=segmentation,
+        cleaning=cleaning,
+        remeshing=remeshing,
+        timings=timings,
+        config=cfg,
+        seed=seed,
+    )

@@ -1,0 +1,517 @@
+"""Stage 2: isotropic remeshing, only where it helps the chart solver.
+
+The Hessian solver (:mod:`segparam.parameterize`) fits a quadratic on every vertex's 1-ring, so it
+needs well-shaped triangles: on slivers it folds. Remeshing is not free, though: on charts that are
+already regular (valence ~6), isotropic remeshing creates valence-5 and valence-7 vertices whose
+neighbourhoods then have to grow, and the solver gets worse. This module therefore
+
+* measures the triangle quality (:func:`mesh_quality`: angles, valence, edge-length spread),
+* decides from it (:func:`should_remesh`, the ``"auto"`` policy, thresholds measured by
+  ``benchmarks/bench_remesh.py``), and
+* remeshes with pymeshlab's isotropic explicit remeshing at the edge length of an equilateral
+  mesh with the input's area and face count (:func:`equal_area_edge`, so the vertex count stays
+  about the same; the mean edge length overestimates it on slivers), keeping boundaries, sharp
+  features and the orientation, then checks that the topology (components, boundary loops,
+  Euler characteristic), manifoldness and boundary are unchanged; if not, the input is kept and
+  the reason says why (:func:`remesh`).
+
+References
+----------
+M. Botsch, L. Kobbelt, A remeshing approach to multiresolution modeling, SGP 2004.
+P. Cignoni et al., MeshLab / VCGlib ``IsotropicRemeshing`` (the implementation used here).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .errors import ConfigError, InvalidMeshError
+from .mesh import (
+    boundary_edges,
+    boundary_loops,
+    check_mesh,
+    connected_components,
+    corner_angles,
+    edges,
+    euler_characteristic,
+    face_areas,
+    face_normals,
+    is_edge_manifold,
+    is_vertex_manifold,
+)
+
+log = logging.getLogger(__name__)
+
+__all__ = [
+    "MeshQuality",
+    "RemeshConfig",
+    "RemeshResult",
+    "closest_boundary_points",
+    "equal_area_edge",
+    "mesh_quality",
+    "remesh",
+    "should_remesh",
+]
+
+MODES = ("auto", "on", "off")
+#: A corner below this angle (degrees) counts as small (:attr:`MeshQuality.frac_small_angles`).
+SMALL_ANGLE = 20.0
+
+# The "auto" policy (see :func:`should_remesh`); measured by benchmarks/bench_remesh.py.
+#: Remesh when at least this fraction of the faces has a corner below ``SMALL_ANGLE`` ...
+MAX_FRAC_SMALL = 0.05
+#: ... or when the 1st percentile of the faces' smallest angles is below this (degrees) ...
+MIN_ANGLE_P1 = 10.0
+#: ... but never when the connectivity is regular (interior valence std below this): the solver
+#: maps regular meshes well even with thin triangles, and remeshing them made it worse (measured:
+#: 4:1 and 6:1 anisotropic grids, 9/10 bijective as they are, 8/10 and 5/10 after remeshing).
+REGULAR_VALENCE_STD = 0.5
+#: Boundary vertices of the result may leave the input's boundary polyline by at most this
+#: fraction of the target edge length (they are then snapped back onto it).
+BOUNDARY_TOL = 0.05
+#: Faces with an area below ``AREA_TOL * target_edge**2`` count as degenerate.
+AREA_TOL = 1e-8
+
+
+@dataclass(frozen=True)
+class RemeshConfig:
+    """Options of the remesh stage.
+
+    Attributes
+    ----------
+    mode : {"auto", "on", "off"}
+        ``"auto"`` remeshes only when :func:`should_remesh` says so; ``"on"`` always; ``"off"``
+        never (the input vertices are kept, ``--no-remesh``).
+    target_edge : float or None
+        Target edge length in mesh units; ``None`` uses :func:`equal_area_edge` (the edge of an
+        equilateral mesh with the input's area and face count), so that the vertex count stays
+        about the same.
+    feature_angle : float
+        Edges whose dihedral angle exceeds this (degrees) are sharp features and kept.
+    iterations : int
+        Split / collapse / flip / smooth rounds.
+    """
+
+    mode: str = "auto"
+    target_edge: float | None = None
+    feature_angle: float = 30.0
+    iterations: int = 10
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ConfigError(f"remesh mode is {self.mode!r}; expected one of {MODES}")
+        if self.target_edge is not None and not (
+            np.isfinite(self.target_edge) and self.target_edge > 0
+        ):
+            raise ConfigError(f"remesh target_edge is {self.target_edge}; it must be > 0")
+        if not (np.isfinite(self.feature_angle) and 0 <= self.feature_angle <= 180):
+            raise ConfigError(
+                f"remesh feature_angle is {self.feature_angle} degrees; it must be in [0, 180]"
+            )
+        if int(self.iterations) != self.iterations or not 1 <= self.iterations <= 1000:
+            raise ConfigError(
+                f"remesh iterations is {self.iterations}; it must be an integer in [1, 1000]"
+            )
+
+
+@dataclass(frozen=True)
+class MeshQuality:
+    """Measured triangle quality of a mesh.
+
+    Attributes
+    ----------
+    min_angle_p1 : float
+        1st percentile of the faces' smallest corner angles, degrees.
+    min_angle : float
+        Smallest corner angle, degrees.
+    frac_small_angles : float
+        Fraction of faces with a corner below 20 degrees.
+    valence_std : float
+        Standard deviation of the interior vertices' valence (0 on a regular mesh).
+    frac_irregular : float
+        Fraction of interior vertices whose valence is not 6.
+    edge_cv : float
+        Coefficient of variation (std / mean) of the edge lengths.
+    mean_edge : float
+        Mean edge length.
+    """
+
+    min_angle_p1: float
+    min_angle: float
+    frac_small_angles: float
+    valence_std: float
+    frac_irregular: float
+    edge_cv: float
+    mean_edge: float
+
+
+@dataclass(frozen=True)
+class RemeshResult:
+    """Output of :func:`remesh`.
+
+    Attributes
+    ----------
+    V : (n', 3) float64 ndarray
+    F : (m', 3) int64 ndarray
+        The remeshed surface, or the input arrays themselves when ``remeshed`` is False.
+    remeshed : bool
+    reason : str
+        Why it was (not) remeshed, with the numbers.
+    target_edge : float or None
+        Target edge length used (None when not remeshed).
+    before, after : MeshQuality
+        Quality of the input and of the output (equal when not remeshed).
+    """
+
+    V: np.ndarray
+    F: np.ndarray
+    remeshed: bool
+    reason: str
+    target_edge: float | None
+    before: MeshQuality
+    after: MeshQuality
+
+
+# ---------------------------------------------------------------------------------------------
+# Quality and policy
+# ---------------------------------------------------------------------------------------------
+
+
+def _edge_lengths(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    E, _ = edges(F)
+    return E, np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+
+
+def mesh_quality(V, F) -> MeshQuality:
+    """Measure the shape of a mesh's triangles and the regularity of its connectivity.
+
+    Parameters
+    ----------
+    V : (n, 3) array_like of float
+    F : (m, 3) array_like of int
+
+    Returns
+    -------
+    MeshQuality
+
+    Raises
+    ------
+    InvalidMeshError
+        If the mesh is malformed (see :func:`segparam.mesh.check_mesh`).
+    """
+    V, F = check_mesh(V, F, allow_degenerate=True)
+    return _quality(V, F)
+
+
+def _quality(V: np.ndarray, F: np.ndarray) -> MeshQuality:
+    min_angles = np.degrees(corner_angles(V, F).min(axis=1))
+    E, length = _edge_lengths(V, F)
+    valence = np.bincount(E.ravel(), minlength=len(V))
+    interior = valence > 0
+    interior[boundary_edges(F).ravel()] = False
+    val = valence[interior]
+    mean = float(length.mean())
+    return MeshQuality(
+        min_angle_p1=float(np.percentile(min_angles, 1)),
+        min_angle=float(min_angles.min()),
+        frac_small_angles=float(np.mean(min_angles < SMALL_ANGLE)),
+        valence_std=float(val.std()) if len(val) else 0.0,
+        frac_irregular=float(np.mean(val != 6)) if len(val) else 0.0,
+        edge_cv=float(length.std() / mean) if mean > 0 else 0.0,
+        mean_edge=mean,
+    )
+
+
+def equal_area_edge(V, F) -> float:
+    """Edge length of an equilateral mesh with the same area and number of faces.
+
+    ``sqrt(4 A / (sqrt(3) m))`` for total area ``A`` and ``m`` faces: the target that keeps the
+    face count. It equals the mean edge length on an equilateral grid and is smaller on slivers
+    (measured: 0.94x the mean on random Delaunay patches, 0.79x on stretched grids, where
+    remeshing at the mean edge length lost 10% and 30% of the faces).
+
+    Parameters
+    ----------
+    V : (n, 3) float ndarray
+    F : (m, 3) int ndarray
+
+    Returns
+    -------
+    float
+    """
+    return float(np.sqrt(4.0 * face_areas(V, F).sum() / (np.sqrt(3.0) * len(F))))
+
+
+def should_remesh(q: MeshQuality) -> tuple[bool, str]:
+    """The ``"auto"`` policy: remesh slivers, leave regular meshes alone.
+
+    Remesh when the triangles are badly shaped (``frac_small_angles >= MAX_FRAC_SMALL`` or
+    ``min_angle_p1 < MIN_ANGLE_P1``), unless the connectivity is regular
+    (``valence_std < REGULAR_VALENCE_STD``): there the solver does well even on thin triangles,
+    and remeshing only adds irregular (valence 5 and 7) vertices. ``edge_cv`` is reported but
+    does not decide: folded regular grids reach 0.24 and map well.
+
+    Parameters
+    ----------
+    q : MeshQuality
+
+    Returns
+    -------
+    remesh : bool
+    reason : str
+        A sentence with the numbers that decided.
+    """
+    regular = q.valence_std < REGULAR_VALENCE_STD
+    slivers = q.frac_small_angles >= MAX_FRAC_SMALL or q.min_angle_p1 < MIN_ANGLE_P1
+    shape = (
+        f"{100 * q.frac_small_angles:.1f}% of faces have an angle < {SMALL_ANGLE:g} deg "
+        f"(limit {100 * MAX_FRAC_SMALL:g}%), 1st-percentile min angle {q.min_angle_p1:.1f} deg "
+        f"(limit {MIN_ANGLE_P1:g})"
+    )
+    conn = (
+        f"valence std {q.valence_std:.2f} (regular < {REGULAR_VALENCE_STD:g}), "
+        f"{100 * q.frac_irregular:.0f}% irregular vertices, edge-length cv {q.edge_cv:.2f}"
+    )
+    if regular:
+        return False, f"regular mesh, kept: {conn}; {shape}"
+    if slivers:
+        return True, f"slivers: {shape}; {conn}"
+    return False, f"well-shaped triangles, kept: {shape}; {conn}"
+
+
+# ---------------------------------------------------------------------------------------------
+# Remeshing
+# ---------------------------------------------------------------------------------------------
+
+
+def closest_boundary_points(
+    V0: np.ndarray, F0: np.ndarray, P: np.ndarray, *, k: int = 8
+) -> tuple[np.ndarray, np.ndarray]:
+    """Closest points of a mesh's boundary polyline to query points.
+
+    Checks the boundary segments incident to the ``k`` nearest boundary vertices of each point,
+    which finds the closest segment unless boundary edge lengths vary by a large factor locally.
+
+    Parameters
+    ----------
+    V0 : (n, 3) float ndarray
+    F0 : (m, 3) int ndarray
+        The mesh whose boundary is measured.
+    P : (p, 3) float ndarray
+        Query points.
+
+    Returns
+    -------
+    distance : (p,) float64 ndarray
+        ``inf`` if the mesh has no boundary.
+    closest : (p, 3) float64 ndarray
+        The closest boundary point (``P`` itself if the mesh has no boundary).
+    """
+    B = boundary_edges(F0)
+    if len(B) == 0 or len(P) == 0:
+        return np.full(len(P), np.inf), P.copy()
+    # Index every segment by both end points, so both segments at a near vertex are tried.
+    ends = np.r_[B[:, 0], B[:, 1]]
+    seg = np.r_[np.arange(len(B)), np.arange(len(B))]
+    k = min(k, len(ends))
+    _, idx = cKDTree(V0[ends]).query(P, k=k)
+    s = seg[idx.reshape(len(P), k)]
+    A, D = V0[B[s, 0]], V0[B[s, 1]] - V0[B[s, 0]]
+    t = ((P[:, None, :] - A) * D).sum(-1) / np.maximum((D * D).sum(-1), 1e-300)
+    Q = A + np.clip(t, 0.0, 1.0)[..., None] * D
+    dist = np.linalg.norm(P[:, None, :] - Q, axis=-1)
+    best = dist.argmin(axis=1)
+    rows = np.arange(len(P))
+    return dist[rows, best], Q[rows, best]
+
+
+def _topology(F: np.ndarray) -> tuple[int, int, int]:
+    count, _ = connected_components(F)
+    return count, len(boundary_loops(F)), euler_characteristic(F)
+
+
+def _compact(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    used = np.zeros(len(V), dtype=bool)
+    used[F.ravel()] = True
+    new = np.cumsum(used) - 1
+    return V[used], new[F]
+
+
+def _run_pymeshlab(
+    V: np.ndarray, F: np.ndarray, target: float, config: RemeshConfig
+) -> tuple[np.ndarray, np.ndarray]:
+    import pymeshlab  # slow to import; only needed here
+
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=V, face_matrix=F.astype(np.int32)))
+    ms.meshing_isotropic_explicit_remeshing(
+        iterations=int(config.iterations),
+        adaptive=False,
+        selectedonly=False,
+        targetlen=pymeshlab.PureValue(target),
+        featuredeg=float(config.feature_angle),
+        checksurfdist=True,
+        # Keep the surface: a remeshed vertex stays within a fraction of an edge of the input.
+        maxsurfdist=pymeshlab.PureValue(0.5 * target),
+        splitflag=True,
+        collapseflag=True,
+        swapflag=True,
+        smoothflag=True,
+        reprojectflag=True,
+    )
+    m = ms.current_mesh()
+    V2 = np.asarray(m.vertex_matrix(), dtype=np.float64)
+    F2 = np.asarray(m.face_matrix(), dtype=np.int64)
+    return _compact(V2, F2)
+
+
+def _orient_like(V0: np.ndarray, F0: np.ndarray, V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Flip whole components of ``(V, F)`` whose normals disagree with the input's.
+
+    Each output face votes (area-weighted) with the sign of its normal's dot product with the
+    normal of the input face nearest to its centroid; a consistently oriented component agrees
+    or disagrees as a whole, so a majority vote per component is robust to the few faces whose
+    nearest input face is on the other wall of a fold.
+
+    Returns
+    -------
+    (m', 3) int64 ndarray
+    """
+    _, nearest = cKDTree(V0[F0].mean(axis=1)).query(V[F].mean(axis=1))
+    cross = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    vote = (cross * face_normals(V0, F0)[nearest]).sum(axis=1)
+    count, label = connected_components(F)
+    flip = np.bincount(label, weights=vote, minlength=count) < 0
+    if flip.any():
+        log.debug("remesh: %d of %d components came back flipped", int(flip.sum()), count)
+        F = np.where(flip[label, None], F[:, ::-1], F)
+    return F
+
+
+def _validate(
+    V0: np.ndarray, F0: np.ndarray, V: np.ndarray, F: np.ndarray, target: float
+) -> tuple[np.ndarray, np.ndarray, str]:
+    """Check the remeshed surface against the input.
+
+    Returns ``V`` (boundary vertices snapped onto the input boundary polyline), ``F`` (with the
+    input orientation) and a description of the first problem found ("" if none).
+    """
+    if len(F) == 0:
+        return V, F, "remeshing removed every face"
+    if not is_edge_manifold(F) or not is_vertex_manifold(F, len(V)).all():
+        return V, F, "remeshing produced a non-manifold or inconsistently oriented mesh"
+    before, after = _topology(F0), _topology(F)
+    if before != after:
+        return (
+            V,
+            F,
+            (
+                "remeshing changed the topology (components, boundary loops, Euler characteristic) "
+                f"from {before} to {after}"
+            ),
+        )
+    F = _orient_like(V0, F0, V, F)
+    B = np.unique(boundary_edges(F))
+    if len(B):
+        # Boundary vertices slide along the boundary and are reprojected onto the surface, not
+        # onto the boundary polyline: on a curved boundary they end up off it by a sagitta
+        # (measured: below 1% of an edge). Snap them back.
+        dev, Q = closest_boundary_points(V0, F0, V[B])
+        if dev.max() > BOUNDARY_TOL * target:
+            return (
+                V,
+                F,
+                (
+                    f"a boundary vertex left the input boundary by {dev.max():.3g} "
+                    f"(tolerance {BOUNDARY_TOL * target:.3g})"
+                ),
+            )
+        V = V.copy()
+        V[B] = Q
+    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    n_zero = int(np.sum(area <= AREA_TOL * target**2))
+    if n_zero:
+        return V, F, f"remeshing produced {n_zero} zero-area faces"
+    return V, F, ""
+
+
+def remesh(V, F, *, config: RemeshConfig | None = None) -> RemeshResult:
+    """Isotropic remeshing of a surface when (by ``config.mode``) it helps the chart solver.
+
+    The result keeps the input's boundary loops (boundary vertices stay on the input boundary
+    polyline), sharp edges (dihedral angle above ``config.feature_angle``), topology and face
+    orientation. If pymeshlab's result breaks any of these, the input is returned unchanged and
+    ``reason`` names the problem (and a warning is logged).
+
+    Parameters
+    ----------
+    V : (n, 3) array_like of float
+    F : (m, 3) array_like of int
+        A manifold, consistently oriented triangle mesh.
+    config : RemeshConfig, optional
+        Defaults to ``RemeshConfig()`` (``mode="auto"``, target = :func:`equal_area_edge`).
+
+    Returns
+    -------
+    RemeshResult
+        With ``V``, ``F`` the very input arrays when not remeshed.
+
+    Raises
+    ------
+    InvalidMeshError
+        If the input mesh is malformed.
+    ConfigError
+        If ``config`` is not a :class:`RemeshConfig`.
+    """
+    config = RemeshConfig() if config is None else config
+    if not isinstance(config, RemeshConfig):
+        raise ConfigError(f"config must be a RemeshConfig, got {type(config).__name__}")
+    V_in, F_in = V, F
+    V, F = check_mesh(V, F, allow_degenerate=True)
+    before = _quality(V, F)
+
+    def keep(reason: str) -> RemeshResult:
+        log.info("remesh: input kept (%s)", reason)
+        return RemeshResult(V_in, F_in, False, reason, None, before, before)
+
+    if config.mode == "off":
+        return keep("remeshing is off")
+    if config.mode == "auto":
+        go, reason = should_remesh(before)
+        if not go:
+            return keep(reason)
+    else:
+        reason = "remeshing is on"
+    target = float(config.target_edge) if config.target_edge is not None else equal_area_edge(V, F)
+    if not target > 0:
+        area = face_areas(V, F).sum()
+        raise InvalidMeshError(f"the mesh has total area {area:.3g}; it cannot be remeshed")
+
+    t0 = time.perf_counter()
+    V2, F2 = _run_pymeshlab(V, F, target, config)
+    V2, F2, problem = _validate(V, F, V2, F2, target)
+    seconds = time.perf_counter() - t0
+    if problem:
+        log.warning("remesh: %s; the input is kept", problem)
+        return keep(f"{problem}; the input is kept")
+    after = _quality(V2, F2)
+    if config.mode == "auto" and after.min_angle_p1 <= before.min_angle_p1:
+        return keep(
+            f"{reason}; but remeshing did not raise the 1st-percentile min angle "
+            f"({before.min_angle_p1:.1f} -> {after.min_angle_p1:.1f} deg), the input is kept"
+        )
+    log.info(
+        "remesh: %d -> %d faces in %.2f s, target edge %.4g, min-angle p1 %.1f -> %.1f deg",
+        len(F),
+        len(F2),
+        seconds,
+        target,
+        before.min_angle_p1,
+        after.min_angle_p1,
+    )
+    return RemeshResult(V2, F2, True, f"{reason}; target edge {target:.4g}", target, before, after)
