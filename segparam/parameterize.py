@@ -658,14 +658,20 @@ class HessianSolver:
         Y, values = hessian_eigenmap(self.K, seed=seed)
         t1 = time.perf_counter()
         uv = orient(isometric_fit(self.V, self.F, Y), self.F)
-        quality = chart_quality(self.V, self.F, uv)
         t2 = time.perf_counter()
         refined = False
+        quality = None
         if refine == "arap":
             uv_r = arap_refine(self.V, self.F, uv, iterations=refine_iterations)
             q_r = chart_quality(self.V, self.F, uv_r)
-            if q_r.bijective or (not quality.bijective and q_r.n_flipped < quality.n_flipped):
+            if q_r.bijective:
                 uv, quality, refined = uv_r, q_r, True
+            else:
+                quality = chart_quality(self.V, self.F, uv)
+                if not quality.bijective and q_r.n_flipped < quality.n_flipped:
+                    uv, quality, refined = uv_r, q_r, True
+        if quality is None:
+            quality = chart_quality(self.V, self.F, uv)
         t3 = time.perf_counter()
         return ChartMap(
             uv=uv - uv.min(axis=0),
