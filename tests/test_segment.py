@@ -105,3 +105,15 @@ def test_config_errors():
         SegmentConfig(n_charts=0)
     with pytest.raises(ConfigError, match="curvature_per_chart"):
         SegmentConfig(curvature_per_chart=-1)
+
+
+def test_integrated_curvature_ignores_noise_but_keeps_real_curvature():
+    from segparam.segment import integrated_curvature
+
+    V, F = tri_grid(40, 40)
+    rng = np.random.default_rng(0)
+    V[:, 2] = 0.3 * (1 / 39) * rng.standard_normal(len(V))  # noise at 30% of an edge
+    raw = integrated_curvature(V, F, passes=0)
+    assert integrated_curvature(V, F) < 0.2 * raw
+    Vs, Fs = icosphere()
+    assert integrated_curvature(Vs, Fs) == pytest.approx(4 * np.pi)
