@@ -1,0 +1,399 @@
+"""segparam vs. xatlas: time and atlas quality on the same meshes, in the same run.
+
+Meshes are built in code (deterministic):
+
+``icosphere``
+    ``trimesh.creation.icosphere(5)`` (20480 faces).
+``torus``
+    A 160 x 64 quad torus, triangulated (20480 faces).
+``plate-holes``
+    A CAD-like 4 x 3 plate, 0.25 thick, with six through holes: structured cells, sharp edges,
+    tall wall triangles (genus 6).
+``wavy-sheet``
+    A scan-like open sheet: a jittered grid with a wavy height field plus noise and four holes.
+``brain-<n>``
+    ``segparam.synthetic.brain_like_surface(n)`` for n = 20k, 100k (and 300k with ``--large``).
+
+For each mesh and tool: wall seconds, charts, flipped triangles, mirrored charts, overlap
+(texels shared by two charts, ``footprint_conflicts`` at 1024 with padding 0), utilization (uv
+triangle area over the unit square; xatlas's uvs are put in the square of its atlas' longer
+side), L2 / Linf stretch and angle distortion (``segparam.quality.distortion``).
+
+Orientation is judged per chart: a chart whose signed uv area is mostly negative is *mirrored*
+(a valid texture, but mirrored); a triangle whose sign is opposite to its chart's majority, or of
+zero area, is *flipped*. ``negative`` counts triangles with signed area <= 0 relative to the
+input winding, as ``Atlas.report()`` does.
+
+xatlas runs with its defaults except ``PackOptions.resolution = 1024`` and ``padding = 2`` (ours:
+``PackConfig`` defaults 1024 / 2). segparam runs with remesh mode ``off``; when the ``auto``
+policy would remesh a mesh, a second ``segparam-auto`` row is added.
+
+Usage::
+
+    python benchmarks/bench_atlas.py [--quick] [--large] [--out benchmarks/results/atlas.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from segparam.pack import footprint_conflicts
+from segparam.pipeline import PipelineConfig, build_atlas
+from segparam.quality import distortion, signed_areas
+from segparam.remesh import mesh_quality, should_remesh
+from segparam.synthetic import brain_like_surface
+
+RESOLUTION = 1024
+PADDING = 2
+
+# ----------------------------------------------------------------------------------------------
+# meshes
+
+
+def icosphere(subdiv: int = 5) -> tuple[np.ndarray, np.ndarray]:
+    import trimesh
+
+    m = trimesh.creation.icosphere(subdivisions=subdiv)
+    return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
+
+
+def grid_faces(nu: int, nv: int, *, wrap_u: bool, wrap_v: bool) -> np.ndarray:
+    """Triangles of an nu x nv quad grid on vertices ``i * nv_pts + j``."""
+    nv_pts = nv if wrap_v else nv + 1
+    nu_pts = nu if wrap_u else nu + 1
+    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
+    a = i * nv_pts + j
+    b = ((i + 1) % nu_pts) * nv_pts + j
+    c = ((i + 1) % nu_pts) * nv_pts + (j + 1) % nv_pts
+    d = i * nv_pts + (j + 1) % nv_pts
+    return np.vstack(
+        [np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)]
+    )
+
+
+def torus(n_major: int = 160, n_minor: int = 64, r: float = 0.35) -> tuple[np.ndarray, np.ndarray]:
+    u = np.linspace(0, 2 * np.pi, n_major, endpoint=False)
+    v = np.linspace(0, 2 * np.pi, n_minor, endpoint=False)
+    U, W = np.meshgrid(u, v, indexing="ij")
+    V = np.stack(
+        [(1 + r * np.cos(W)) * np.cos(U), (1 + r * np.cos(W)) * np.sin(U), r * np.sin(W)], -1
+    ).reshape(-1, 3)
+    return V, grid_faces(n_major, n_minor, wrap_u=True, wrap_v=True).astype(np.int64)
+
+
+def _square_boundary(m: int) -> np.ndarray:
+    """4m points counter-clockwise on the boundary of [-1, 1]^2, starting at (1, 0)."""
+    s = np.linspace(-1, 1, m + 1)[:-1]
+    half = m // 2
+    right = np.stack([np.ones(m), s], 1)
+    top = np.stack([-s, np.ones(m)], 1)
+    left = np.stack([-np.ones(m), -s], 1)
+    bottom = np.stack([s, -np.ones(m)], 1)
+    P = np.vstack([right, top, left, bottom])
+    return np.roll(P, -half, axis=0)  # start at angle 0
+
+
+def _cell(m: int, hole: float | None, n_r: int) -> tuple[np.ndarray, np.ndarray]:
+    """One square cell [-1, 1]^2 sampled with m + 1 points a side, optionally around a hole."""
+    if hole is None:
+        g = np.linspace(-1, 1, m + 1)
+        X, Y = np.meshgrid(g, g, indexing="ij")
+        return np.stack([X.ravel(), Y.ravel()], 1), grid_faces(m, m, wrap_u=False, wrap_v=False)
+    outer = _square_boundary(m)
+    theta = np.arctan2(outer[:, 1], outer[:, 0])
+    inner = hole * np.stack([np.cos(theta), np.sin(theta)], 1)
+    t = np.linspace(0, 1, n_r + 1)[:, None, None]
+    P = ((1 - t) * inner[None] + t * outer[None]).reshape(-1, 2)
+    # rings are the v direction (periodic), radii the u direction
+    F = grid_faces(n_r, 4 * m, wrap_u=False, wrap_v=True)
+    return P, F[:, [0, 2, 1]]
+
+
+def plate_with_holes(
+    nx: int = 4, ny: int = 3, m: int = 16, thickness: float = 0.25
+) -> tuple[np.ndarray, np.ndarray]:
+    """A closed plate of nx x ny unit cells, every other cell with a through hole."""
+    pts, tris, off = [], [], 0
+    for ix in range(nx):
+        for iy in range(ny):
+            hole = (0.3 + 0.1 * (ix % 2)) if (ix + iy) % 2 == 0 else None
+            P, T = _cell(m, hole, n_r=8)
+            pts.append(0.5 * P + [ix + 0.5, iy + 0.5])
+            tris.append(T + off)
+            off += len(P)
+    P = np.vstack(pts)
+    T = np.vstack(tris)
+    # weld the shared cell borders
+    key = np.round(P * 1e6).astype(np.int64)
+    _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    P, T = P[first], inv.ravel()[T]
+    n = len(P)
+    # orient the top counter-clockwise
+    sa = signed_areas(P, T)
+    T = np.where((sa < 0)[:, None], T[:, [0, 2, 1]], T)
+    # boundary half-edges of the top: those whose reverse is missing
+    he = np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
+    code = he[:, 0] * n + he[:, 1]
+    rev = he[:, 1] * n + he[:, 0]
+    B = he[~np.isin(rev, code)]
+    a, b = B[:, 0], B[:, 1]
+    walls = np.vstack([np.stack([b, a, a + n], 1), np.stack([b, a + n, b + n], 1)])
+    V = np.vstack([np.c_[P, np.full(n, thickness)], np.c_[P, np.zeros(n)]])
+    F = np.vstack([T, T[:, [0, 2, 1]] + n, walls])
+    return V, F.astype(np.int64)
+
+
+def wavy_sheet(nx: int = 200, ny: int = 100, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Scan-like open sheet: jittered grid, wavy heights with noise, four holes."""
+    rng = np.random.default_rng(seed)
+    h = 2.0 / nx
+    x, y = np.meshgrid(np.linspace(0, 2, nx + 1), np.linspace(0, 1, ny + 1), indexing="ij")
+    x = x + rng.uniform(-0.3, 0.3, x.shape) * h
+    y = y + rng.uniform(-0.3, 0.3, y.shape) * h
+    z = (
+        0.12 * np.sin(3 * x + 1) * np.cos(4 * y)
+        + 0.05 * np.sin(9 * x * y)
+        + 0.003 * rng.standard_normal(x.shape)
+    )
+    V = np.stack([x.ravel(), y.ravel(), z.ravel()], 1)
+    F = grid_faces(nx, ny, wrap_u=False, wrap_v=False).astype(np.int64)
+    holes = np.array([[0.4, 0.35, 0.12], [1.0, 0.6, 0.18], [1.55, 0.3, 0.1], [1.6, 0.75, 0.08]])
+    c = V[F, :2].mean(axis=1)
+    inside = np.zeros(len(F), dtype=bool)
+    for cx, cy, r in holes:
+        inside |= np.hypot(c[:, 0] - cx, c[:, 1] - cy) < r
+    F = F[~inside]
+    used, inv = np.unique(F, return_inverse=True)
+    return V[used], inv.reshape(-1, 3)
+
+
+def meshes(quick: bool, large: bool) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    out = {
+        "icosphere": icosphere(5),
+        "torus": torus(),
+        "plate-holes": plate_with_holes(),
+        "wavy-sheet": wavy_sheet(),
+        "brain-20k": brain_like_surface(20_000),
+    }
+    if not quick:
+        out["brain-100k"] = brain_like_surface(100_000)
+        if large:
+            out["brain-300k"] = brain_like_surface(300_000)
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# measures
+
+
+def orientation(uv: np.ndarray, uv_F: np.ndarray, chart: np.ndarray) -> dict[str, int]:
+    """Mirrored charts and flipped triangles, judged against each chart's majority sign."""
+    sa = signed_areas(uv, uv_F)
+    n_charts = int(chart.max()) + 1
+    net = np.bincount(chart, weights=sa, minlength=n_charts)
+    sign = np.where(net < 0, -1.0, 1.0)
+    return {
+        "flipped": int((sa * sign[chart] <= 0).sum()),
+        "mirrored_charts": int((net < 0).sum()),
+        "negative": int((sa <= 0).sum()),
+    }
+
+
+def per_chart(uv: np.ndarray, uv_F: np.ndarray, chart: np.ndarray):
+    """Per-chart (uv, local faces), loop over charts."""
+    order = np.argsort(chart, kind="stable")
+    bounds = np.searchsorted(chart[order], np.arange(int(chart.max()) + 2))
+    uvs, faces = [], []
+    for k in range(len(bounds) - 1):
+        tri = uv_F[order[bounds[k] : bounds[k + 1]]]
+        if len(tri) == 0:
+            continue
+        used, local = np.unique(tri, return_inverse=True)
+        uvs.append(uv[used])
+        faces.append(local.reshape(-1, 3))
+    return uvs, faces
+
+
+def uv_components(uv_F: np.ndarray, n_uv: int) -> np.ndarray:
+    """Connected components of the uv mesh (faces sharing a uv row), per face."""
+    m = len(uv_F)
+    rows = np.repeat(np.arange(m), 3)
+    A = sp.csr_matrix((np.ones(3 * m), (rows, uv_F.ravel())), shape=(m, n_uv))
+    _, lab = connected_components(A @ A.T, directed=False)
+    return lab.astype(np.int64)
+
+
+def measures(P: np.ndarray, uv: np.ndarray, uv_F: np.ndarray, chart: np.ndarray) -> dict:
+    """All figures of an atlas; P holds the 3-D position of each uv row, uv is in [0, 1]^2."""
+    uvs, faces = per_chart(uv, uv_F, chart)
+    row = {"charts": len(uvs)}
+    row.update(orientation(uv, uv_F, chart))
+    row["overlap_texels"] = footprint_conflicts(uvs, faces, resolution=RESOLUTION, padding=0)
+    row["utilization"] = float(np.abs(signed_areas(uv, uv_F)).sum())
+    d = distortion(P, uv_F, uv)
+    row.update({k: d[k] for k in ("l2_stretch", "linf_stretch", "angle_distortion")})
+    return row
+
+
+# ----------------------------------------------------------------------------------------------
+# tools
+
+
+def run_segparam(V: np.ndarray, F: np.ndarray, mode: str) -> dict:
+    cfg = PipelineConfig().replace(remesh={"mode": mode})
+    t0 = time.perf_counter()
+    atlas = build_atlas(V, F, cfg, seed=0)
+    dt = time.perf_counter() - t0
+    row = {"tool": "segparam" if mode == "off" else f"segparam-{mode}", "seconds": dt}
+    row.update(measures(atlas.V[atlas.uv_vertex], atlas.uv, atlas.uv_F, atlas.chart_of_face))
+    row["faces_out"] = int(len(atlas.uv_F))
+    row["stages"] = {k: round(v, 3) for k, v in atlas.timings.items()}
+    row["remeshed"] = bool(atlas.remeshing.remeshed)
+    return row
+
+
+def run_xatlas(V: np.ndarray, F: np.ndarray) -> dict:
+    import xatlas
+
+    t0 = time.perf_counter()
+    atlas = xatlas.Atlas()
+    atlas.add_mesh(V.astype(np.float32), F.astype(np.uint32))
+    po = xatlas.PackOptions()
+    po.resolution = RESOLUTION
+    po.padding = PADDING
+    atlas.generate(pack_options=po)
+    vmap, idx, uv = atlas.get_mesh(0)
+    dt = time.perf_counter() - t0
+    vmap = vmap.astype(np.int64)
+    idx = idx.astype(np.int64)
+    uv = uv.astype(np.float64)
+    w, h = int(atlas.width), int(atlas.height)
+    side = max(w, h)
+    uv = uv * [w / side, h / side]  # xatlas's uvs are per axis in [0, 1]
+    chart = np.full(len(idx), -1, dtype=np.int64)
+    n_xcharts = atlas.get_mesh_chart_count(0)
+    for c in range(n_xcharts):  # loop over charts
+        chart[np.asarray(atlas.get_mesh_chart(0, c).faces, dtype=np.int64)] = c
+    source = "xatlas charts"
+    if (chart < 0).any():  # faces xatlas left out of every chart: take uv components instead
+        chart = uv_components(idx, len(uv))
+        source = "uv components"
+    row = {"tool": "xatlas", "seconds": dt}
+    row.update(measures(V[vmap], uv, idx, chart))
+    row.update(
+        {
+            "faces_out": int(len(idx)),
+            "chart_source": source,
+            "atlas_size": [w, h],
+            "atlas_count": int(atlas.atlas_count),
+            "xatlas_texel_utilization": float(atlas.utilization),
+        }
+    )
+    return row
+
+
+# ----------------------------------------------------------------------------------------------
+
+
+COLS = (
+    ("seconds", "sec", "8.2f"),
+    ("ratio", "ratio", "6.2f"),
+    ("charts", "charts", "6d"),
+    ("flipped", "flip", "5d"),
+    ("mirrored_charts", "mirr", "5d"),
+    ("overlap_texels", "overlap", "7d"),
+    ("utilization", "util", "6.3f"),
+    ("l2_stretch", "L2", "6.3f"),
+    ("linf_stretch", "Linf", "8.2f"),
+    ("angle_distortion", "angle", "6.3f"),
+)
+
+
+def show_header() -> None:
+    print(
+        f"{'mesh':12s} {'faces':>7s} {'tool':14s} "
+        + " ".join(f"{h:>{f[:-1].split('.')[0]}s}" for _, h, f in COLS)
+    )
+
+
+def show_row(r: dict) -> None:
+    cells = []
+    for key, _, fmt in COLS:
+        v = r.get(key)
+        width = fmt[:-1].split(".")[0]
+        cells.append(f"{'-':>{width}s}" if v is None else format(v, fmt))
+    print(f"{r['mesh']:12s} {r['faces']:7d} {r['tool']:14s} " + " ".join(cells), flush=True)
+
+
+def _json_ready(value):
+    if isinstance(value, dict):
+        return {k: _json_ready(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_ready(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float):
+        return round(value, 5) if np.isfinite(value) else None
+    return value
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="only the small meshes (up to 20k)")
+    ap.add_argument("--large", action="store_true", help="add brain-300k")
+    ap.add_argument("--only", nargs="+", default=None, help="mesh names to run")
+    ap.add_argument("--out", default="benchmarks/results/atlas.json")
+    args = ap.parse_args()
+
+    rows = []
+    show_header()
+    for name, (V, F) in meshes(args.quick, args.large).items():
+        if args.only and name not in args.only:
+            continue
+        V = np.asarray(V, dtype=np.float64)
+        F = np.asarray(F, dtype=np.int64)
+        auto, reason = should_remesh(mesh_quality(V, F))
+        runs = [(run_segparam, ("off",)), (run_xatlas, ())]
+        if auto:
+            runs.insert(1, (run_segparam, ("auto",)))
+        mesh_rows = []
+        for run, extra in runs:
+            r = {"mesh": name, "faces": int(len(F)), "vertices": int(len(V))}
+            r.update(run(V, F, *extra))
+            mesh_rows.append(r)
+        x_sec = mesh_rows[-1]["seconds"]
+        for r in mesh_rows:
+            if r["tool"].startswith("segparam"):
+                r["ratio"] = r["seconds"] / x_sec
+            if r["tool"] == "segparam":
+                r["auto_would_remesh"] = bool(auto)
+                r["auto_reason"] = reason
+            show_row(r)
+        rows.extend(mesh_rows)
+
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    result = {
+        "benchmark": "atlas: segparam vs xatlas",
+        "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
+        "python": platform.python_version(),
+        "resolution": RESOLUTION,
+        "padding": PADDING,
+        "notes": "ratio = segparam seconds / xatlas seconds on the same mesh in the same run",
+        "rows": rows,
+    }
+    out.write_text(json.dumps(_json_ready(result), indent=2) + "\n")
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()
