@@ -170,7 +170,7 @@ def parameterize_charts(
     cfg = config or SplitConfig()
     labels = np.asarray(labels, dtype=np.int64)
     n_src = int(labels.max()) + 1
-    W = face_affinity(V, F)
+    W = None  # the crease-aware face affinity, built on the first chart that must be split
     order = np.argsort(labels, kind="stable")
     bounds = np.searchsorted(labels[order], np.arange(n_src + 1))
     charts: list[Chart] = []
@@ -188,6 +188,8 @@ def parameterize_charts(
                 charts.append(chart)
                 pieces += 1
                 continue
+            if W is None:
+                W = face_affinity(V, F)
             sub = W[faces][:, faces]
             n_comp, comp = _cc(sub, directed=False)
             if n_comp > 1:
