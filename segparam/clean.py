@@ -180,7 +180,8 @@ def clean(
     ------
     InvalidMeshError
         On a wrong shape, non-finite coordinate or index out of range (see
-        :func:`segparam.mesh.check_mesh`), a negative tolerance, or when no face is left.
+        :func:`segparam.mesh.check_mesh`), coordinates so large that squared distances
+        overflow, a negative tolerance, or when no face is left.
     """
     if not (merge_tolerance >= 0 and area_tolerance >= 0):
         raise InvalidMeshError(
@@ -201,6 +202,9 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
     used = np.zeros(n, dtype=bool)
     used[F.ravel()] = True
     diag = float(np.linalg.norm(np.ptp(V[used], axis=0)))
+    if not np.isfinite(diag * diag):  # tolerances and distances square it
+        big = float(np.abs(V[used]).max())
+        raise InvalidMeshError(f"coordinates up to {big:.3g} overflow float64 geometry; rescale")
 
     # 1. merge vertices
     rep = _merge_vertices(V, merge_tolerance * diag)

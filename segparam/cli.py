@@ -172,6 +172,7 @@ def _cmd_pack(args: argparse.Namespace) -> int:
 def _cmd_atlas(args: argparse.Namespace) -> int:
     import time
 
+    from .errors import InvalidMeshError
     from .io import load_mesh
     from .pipeline import build_atlas
 
@@ -187,6 +188,8 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
     bar = _progress_bar(args.quiet)
     try:
         atlas = build_atlas(V, F, config, seed=args.seed, progress=bar.update if bar else None)
+    except InvalidMeshError as exc:
+        raise InvalidMeshError(f"{source}: {exc}") from None
     finally:
         if bar:
             bar.close()
@@ -255,6 +258,19 @@ def _progress_bar(quiet: bool) -> _StageBar | None:
     return None if quiet or not sys.stderr.isatty() else _StageBar()
 
 
+def add_pipeline_options(p: argparse.ArgumentParser) -> None:
+    """The options shared by ``atlas`` and ``batch`` (read back by :func:`_config_from_args`)."""
+    p.add_argument("--config", help="pipeline TOML file, or a bundled name: default, brain, fast")
+    p.add_argument("--resolution", type=int, help="texture size in texels (default 1024)")
+    p.add_argument("--padding", type=int, help="texels between charts and at the border (2)")
+    p.add_argument("--remesh", choices=["auto", "on", "off"], help="remeshing policy (auto)")
+    p.add_argument("--no-remesh", action="store_true", help="keep the input's vertices")
+    p.add_argument("--max-charts", type=int, help="most charts from the segmentation")
+    p.add_argument("--max-distortion", type=float, help="split charts above this s1/s2")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="segparam", description="Triangle meshes to UV atlases (Hessian eigenfunctions)."
@@ -278,18 +294,12 @@ def build_parser() -> argparse.ArgumentParser:
         "input", nargs="?", help=f"mesh file (default: the sample {DEFAULT_MESH_NAME})"
     )
     atlas.add_argument("-o", "--output", help="output folder (default: ./<input stem>_atlas)")
-    atlas.add_argument(
-        "--config", help="pipeline TOML file, or a bundled name: default, brain, fast"
-    )
-    atlas.add_argument("--resolution", type=int, help="texture size in texels (default 1024)")
-    atlas.add_argument("--padding", type=int, help="texels between charts and at the border (2)")
-    atlas.add_argument("--remesh", choices=["auto", "on", "off"], help="remeshing policy (auto)")
-    atlas.add_argument("--no-remesh", action="store_true", help="keep the input's vertices")
-    atlas.add_argument("--max-charts", type=int, help="most charts from the segmentation")
-    atlas.add_argument("--max-distortion", type=float, help="split charts above this s1/s2")
-    atlas.add_argument("--seed", type=int, default=0)
-    atlas.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
+    add_pipeline_options(atlas)
     atlas.set_defaults(func=_cmd_atlas)
+
+    from .batch import add_batch_parser
+
+    add_batch_parser(sub)
 
     def stage(name: str, help_: str, inp: str, out: str, func, options=()) -> None:
         p = sub.add_parser(name, help=help_)

@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import MeshFileError
+from .errors import InvalidMeshError, MeshFileError
+from .mesh import check_mesh
 
 log = logging.getLogger(__name__)
 
@@ -56,8 +57,9 @@ def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     Raises
     ------
     MeshFileError
-        Missing file, a directory, no permission, unsupported format, or content that is not a
-        triangle mesh; the message names the file.
+        Missing file, a directory, no permission, unsupported format, content that is not a
+        triangle mesh, NaN or infinite coordinates, or face indices out of range; the message
+        names the file.
     """
     path = Path(path)
     if not path.exists():
@@ -87,7 +89,12 @@ def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     except Exception as exc:  # parsers raise anything on garbage
         raise MeshFileError(f"{path}: not a readable {suffix[1:].upper()} mesh ({exc})") from None
     if len(F) == 0:
-        raise MeshFileError(f"{path}: contains no faces ({len(V)} points)")
+        points = f" (only {len(V)} points)" if len(V) else ""
+        raise MeshFileError(f"{path}: contains no faces{points}")
+    try:  # checked here so that the message names the file
+        V, F = check_mesh(V, F, allow_degenerate=True)
+    except InvalidMeshError as exc:
+        raise MeshFileError(f"{path}: {exc}") from None
     return V, F
 
 
@@ -96,12 +103,53 @@ def _load_trimesh(data: bytes, suffix: str) -> tuple[np.ndarray, np.ndarray]:
 
     import trimesh
 
-    loaded = trimesh.load(
-        _io.BytesIO(data), file_type=suffix[1:], process=False, force="mesh", maintain_order=True
-    )
+    if suffix in (".obj", ".off"):
+        if b"\0" in data:
+            raise MeshFileError(f"not a readable {suffix[1:].upper()} mesh (binary data, not text)")
+        # trimesh decodes non-UTF-8 text with the optional charset_normalizer (ImportError
+        # without it); the numbers are ASCII, so undecodable bytes can only be in names.
+        data = data.decode("utf-8", errors="replace").encode("utf-8")
+    elif suffix == ".stl":
+        data = _stl_bytes(data)
+    # trimesh logs tracebacks for parts we drop (normals, colours): keep them off stderr.
+    trimesh_log = logging.getLogger("trimesh")
+    level = trimesh_log.level
+    trimesh_log.setLevel(logging.CRITICAL)
+    try:
+        loaded = trimesh.load(
+            _io.BytesIO(data),
+            file_type=suffix[1:],
+            process=False,
+            force="mesh",
+            maintain_order=True,
+        )
+    finally:
+        trimesh_log.setLevel(level)
     V = np.asarray(loaded.vertices, dtype=np.float64).reshape(-1, 3)
     F = np.asarray(loaded.faces, dtype=np.int64).reshape(-1, 3)
     return V, F
+
+
+def _stl_bytes(data: bytes) -> bytes:
+    """STL bytes trimesh can parse, or a clear error for a truncated or corrupt binary STL.
+
+    trimesh parses a binary STL whose length disagrees with its header as ASCII STL, which
+    fails with a misleading message (or an ImportError of the optional charset_normalizer).
+    """
+    count = int(np.frombuffer(data, dtype="<u4", count=1, offset=80)[0]) if len(data) >= 84 else -1
+    if count >= 0 and len(data) == 84 + 50 * count:
+        return data  # binary STL
+    if b"\0" not in data:  # text: binary STL headers and counts have zero bytes
+        # ASCII STL (or text that is not one: trimesh finds no faces); names may be non-UTF-8
+        return data.decode("utf-8", errors="replace").encode("utf-8")
+    if count < 0:
+        raise MeshFileError(
+            f"truncated binary STL: {len(data)} bytes, less than its 84-byte header"
+        )
+    raise MeshFileError(
+        f"truncated or corrupt binary STL: {len(data)} bytes, but its header announces "
+        f"{count} triangles ({84 + 50 * count} bytes)"
+    )
 
 
 def _load_gifti(data: bytes, *, gz: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -336,9 +384,14 @@ def save_atlas(atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: in
             json.dumps(atlas.report(), indent=1, sort_keys=False) + "\n", encoding="utf-8"
         )
         written = []
-        for name in names.values():  # all files exist: move them into place
-            os.replace(stage / name, outdir / name)
-            written.append(outdir / name)
+        try:
+            for name in names.values():  # all files exist: move them into place
+                os.replace(stage / name, outdir / name)
+                written.append(outdir / name)
+        except BaseException:  # e.g. Ctrl-C between two moves: all or nothing
+            for done in written:
+                done.unlink(missing_ok=True)
+            raise
         return written
     finally:
         shutil.rmtree(stage, ignore_errors=True)

@@ -23,6 +23,7 @@ __all__ = [
     "edge_face_counts",
     "edges",
     "euler_characteristic",
+    "unit_frame",
     "face_adjacency",
     "face_areas",
     "face_normals",
@@ -62,7 +63,10 @@ def check_mesh(V, F, *, allow_degenerate: bool = False) -> tuple[np.ndarray, np.
         V = np.asarray(V, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise InvalidMeshError(f"vertices are not numeric: {exc}") from None
-    F_in = np.asarray(F)
+    try:
+        F_in = np.asarray(F)
+    except ValueError as exc:  # a ragged list of faces
+        raise InvalidMeshError(f"faces are not an (m, 3) array: {exc}") from None
     if V.ndim != 2 or V.shape[1] != 3:
         raise InvalidMeshError(f"vertices must have shape (n, 3), got {V.shape}")
     if F_in.ndim != 2 or F_in.shape[1] != 3:
@@ -111,6 +115,11 @@ def _face_cross(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     return np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
 
 
+def _norm3(c: np.ndarray) -> np.ndarray:
+    """Row norms of (k, 3) vectors without overflow (coordinates up to ~1e150 square fine)."""
+    return np.hypot(np.hypot(c[:, 0], c[:, 1]), c[:, 2])
+
+
 def face_areas(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """Triangle areas.
 
@@ -118,7 +127,7 @@ def face_areas(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     -------
     (m,) float64 ndarray
     """
-    return 0.5 * np.linalg.norm(_face_cross(V, F), axis=1)
+    return 0.5 * _norm3(_face_cross(V, F))
 
 
 def face_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -129,7 +138,7 @@ def face_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     (m, 3) float64 ndarray
     """
     c = _face_cross(V, F)
-    norm = np.linalg.norm(c, axis=1, keepdims=True)
+    norm = _norm3(c)[:, None]
     return np.divide(c, norm, out=np.zeros_like(c), where=norm > 0)
 
 
@@ -154,6 +163,18 @@ def vertex_normals(V: np.ndarray, F: np.ndarray, *, weighting: str = "uniform") 
         out[:, k] = np.bincount(F.ravel(), weights=np.repeat(N[:, k], 3), minlength=len(V))
     norm = np.linalg.norm(out, axis=1, keepdims=True)
     return np.divide(out, norm, out=np.zeros_like(out), where=norm > 0)
+
+
+def unit_frame(V: np.ndarray) -> tuple[np.ndarray, float]:
+    """Centre and size (longest side) of the bounding box; size 1 for a single point.
+
+    Stages map ``(V - centre) / size`` into the unit cube before computing: their results are
+    invariant under uniform scaling, and float64 geometry then stays far from overflow whatever
+    the input's units.
+    """
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    size = float(np.max(hi / 2 - lo / 2)) * 2  # halves first: no overflow near float64's limit
+    return lo / 2 + hi / 2, size if size > 0 else 1.0
 
 
 def corner_angles(V: np.ndarray, F: np.ndarray) -> np.ndarray:

@@ -636,11 +636,16 @@ class HessianSolver:
             raise ValueError(f"tangent must be one of {TANGENTS}, got {tangent!r}")
         self.V, self.F = check_chart(V, F)
         self.method, self.tangent = method, tangent
+        # Work in units of the typical edge length, centred: the map is invariant under rigid
+        # motion and uniform scaling, and K's entries (~ length^-2) stay far from over/underflow
+        # whether the input is in metres, nanometres or light years.
+        self.scale = float(np.sqrt(face_areas(self.V, self.F).mean()))
+        self._Vn = (self.V - self.V.mean(axis=0)) / self.scale
         t0 = time.perf_counter()
         if method == "hessian":
-            self.K = hessian_matrix(self.V, self.F, tangent=tangent, min_points=min_points)
+            self.K = hessian_matrix(self._Vn, self.F, tangent=tangent, min_points=min_points)
         else:
-            self.K = classic_hlle_matrix(self.V, n_neighbors=n_neighbors)
+            self.K = classic_hlle_matrix(self._Vn, n_neighbors=n_neighbors)
         self.assemble_seconds = time.perf_counter() - t0
 
     def solve(
@@ -657,24 +662,24 @@ class HessianSolver:
         t0 = time.perf_counter()
         Y, values = hessian_eigenmap(self.K, seed=seed)
         t1 = time.perf_counter()
-        uv = orient(isometric_fit(self.V, self.F, Y), self.F)
+        uv = orient(isometric_fit(self._Vn, self.F, Y), self.F)
         t2 = time.perf_counter()
         refined = False
         quality = None
         if refine == "arap":
-            uv_r = arap_refine(self.V, self.F, uv, iterations=refine_iterations)
-            q_r = chart_quality(self.V, self.F, uv_r)
+            uv_r = arap_refine(self._Vn, self.F, uv, iterations=refine_iterations)
+            q_r = chart_quality(self._Vn, self.F, uv_r)
             if q_r.bijective:
                 uv, quality, refined = uv_r, q_r, True
             else:
-                quality = chart_quality(self.V, self.F, uv)
+                quality = chart_quality(self._Vn, self.F, uv)
                 if not quality.bijective and q_r.n_flipped < quality.n_flipped:
                     uv, quality, refined = uv_r, q_r, True
         if quality is None:
-            quality = chart_quality(self.V, self.F, uv)
+            quality = chart_quality(self._Vn, self.F, uv)
         t3 = time.perf_counter()
         return ChartMap(
-            uv=uv - uv.min(axis=0),
+            uv=(uv - uv.min(axis=0)) * self.scale,
             bijective=quality.bijective,
             quality=quality,
             method=self.method,

@@ -22,7 +22,7 @@ import numpy as np
 from . import __version__
 from .clean import CleanResult, clean
 from .errors import ConfigError, InvalidMeshError
-from .mesh import boundary_edges, face_areas
+from .mesh import boundary_edges, face_areas, unit_frame
 from .pack import PackConfig, PackResult, pack_charts
 from .quality import distortion, signed_areas
 from .remesh import RemeshConfig, RemeshResult, remesh
@@ -213,8 +213,11 @@ def _clean_json(value: Any) -> Any:
 
 def build_report(atlas: Atlas) -> dict[str, Any]:
     """Per-chart and global figures of an atlas (see the README's "Outputs")."""
-    V, F = atlas.V, atlas.F
-    area = face_areas(V, F)
+    # Figures are computed in the unit frame (scale-free ones as they are, areas and lengths
+    # scaled back), so that any input units work.
+    center, size = unit_frame(atlas.V)
+    V, F = (atlas.V - center) / size, atlas.F
+    area = face_areas(V, F) * size**2
     charts = []
     for k, c in enumerate(atlas.charts.charts):
         q = c.quality
@@ -313,10 +316,10 @@ def build_atlas(
     """
     cfg = config or PipelineConfig()
     report = progress or (lambda stage, done, total: None)
-    F_arr = np.asarray(F)
-    if F_arr.ndim == 2 and len(F_arr) > MAX_FACES:
+    n_faces = len(F) if hasattr(F, "__len__") else 0
+    if n_faces > MAX_FACES:
         raise InvalidMeshError(
-            f"mesh has {len(F_arr)} faces; the limit is {MAX_FACES} (about 3 KB of memory per face)"
+            f"mesh has {n_faces} faces; the limit is {MAX_FACES} (about 3 KB of memory per face)"
         )
     timings: dict[str, float] = {}
 

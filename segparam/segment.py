@@ -27,12 +27,14 @@ from .linalg import smallest_eigenpairs
 from .mesh import (
     angle_defect,
     boundary_edges,
+    check_mesh,
     edges,
     euler_characteristic,
     face_adjacency,
     face_areas,
     face_normals,
     is_vertex_manifold,
+    unit_frame,
     vertex_adjacency,
 )
 
@@ -353,6 +355,9 @@ def segment(
     Segmentation
     """
     cfg = config or SegmentConfig()
+    V, F = check_mesh(V, F)
+    center, size = unit_frame(V)
+    V = (V - center) / size  # scale-free from here on
     m = len(F)
     curvature = integrated_curvature(V, F)
     if cfg.n_charts is not None:

@@ -11,6 +11,7 @@ projects bijectively, so the recursion ends and every chart that leaves this sta
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -19,6 +20,7 @@ import numpy as np
 from scipy.sparse.csgraph import connected_components as _cc
 
 from .errors import ConfigError, InvalidMeshError
+from .mesh import check_mesh, unit_frame
 from .parameterize import MIN_POINTS, parameterize_chart
 from .quality import ChartQuality, chart_quality
 from .segment import face_affinity, fiedler_bisect, is_disk
@@ -168,7 +170,16 @@ def parameterize_charts(
     ChartSet
     """
     cfg = config or SplitConfig()
-    labels = np.asarray(labels, dtype=np.int64)
+    V, F = check_mesh(V, F)
+    labels = np.asarray(labels)
+    if labels.shape != (len(F),) or labels.dtype.kind not in "iu" or labels.min() < 0:
+        raise InvalidMeshError(
+            f"labels must be {len(F)} non-negative integers (one chart per face), "
+            f"got shape {labels.shape} and dtype {labels.dtype}"
+        )
+    labels = labels.astype(np.int64)
+    center, size = unit_frame(V)
+    V = (V - center) / size  # scale-free; chart uvs are scaled back below
     n_src = int(labels.max()) + 1
     W = None  # the crease-aware face affinity, built on the first chart that must be split
     order = np.argsort(labels, kind="stable")
@@ -185,7 +196,7 @@ def parameterize_charts(
             if depth == 0:
                 first[src] = chart is not None and chart.method != "projection"
             if chart is not None:
-                charts.append(chart)
+                charts.append(dataclasses.replace(chart, uv=chart.uv * size))
                 pieces += 1
                 continue
             if W is None:
