@@ -28,7 +28,7 @@ DEFAULT_CHART_NAME = "brain_parcel.obj"
 
 
 def _cmd_chart(args: argparse.Namespace) -> int:
-    from .io import load_mesh, render_uv_layout, save_png, write_obj
+    from .io import load_mesh, render_uv_layout, staged_outputs, write_obj
     from .parameterize import parameterize_chart
 
     source = Path(args.input) if args.input else _data(DEFAULT_CHART_NAME)
@@ -37,9 +37,10 @@ def _cmd_chart(args: argparse.Namespace) -> int:
     out = Path(args.output) if args.output else Path(source.stem + "_uv.obj")
     uv = chart.uv - chart.uv.min(axis=0)
     uv = uv / max(float(uv.max()), 1e-300)  # into the unit square, aspect kept
-    write_obj(out, V, F, uv=uv)
     png = out.with_name(out.stem + "_uv.png")
-    save_png(png, render_uv_layout(uv, F))
+    with staged_outputs(out.parent) as stage:  # both files or neither
+        write_obj(stage / out.name, V, F, uv=uv)
+        render_uv_layout(uv, F).save(stage / png.name, format="PNG")
     if not args.quiet:
         q = chart.quality
         print(f"{source.name}: {len(V)} vertices, {len(F)} faces, method {chart.method}")

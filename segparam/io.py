@@ -29,7 +29,7 @@ __all__ = [
     "load_mesh",
     "render_uv_layout",
     "save_atlas",
-    "save_png",
+    "staged_outputs",
     "write_obj",
 ]
 
@@ -319,12 +319,6 @@ def checker_image(size: int = 1024, squares: int = 16):
     return Image.fromarray(img)
 
 
-def save_png(path: str | os.PathLike, image) -> None:
-    """Save a PIL image as PNG atomically."""
-    with atomic_path(path) as tmp:
-        image.save(tmp, format="PNG")
-
-
 def save_atlas(atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: int | None = None):
     """Write an atlas into ``outdir``: ``<stem>.obj/.mtl/_checker.png``, ``<stem>.glb``,
     ``<stem>_uv.png`` and ``report.json``.
@@ -338,23 +332,20 @@ def save_atlas(atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: in
         The files written.
     """
     import json
-    import shutil
 
     import trimesh
 
     outdir = Path(outdir)
-    outdir.mkdir(parents=True, exist_ok=True)
     size = size or atlas.packing.resolution
-    stage = Path(tempfile.mkdtemp(prefix=".segparam-", dir=outdir))
-    try:
-        names = {
-            "obj": f"{stem}.obj",
-            "mtl": f"{stem}.mtl",
-            "checker": f"{stem}_checker.png",
-            "glb": f"{stem}.glb",
-            "uv": f"{stem}_uv.png",
-            "report": "report.json",
-        }
+    names = {
+        "obj": f"{stem}.obj",
+        "mtl": f"{stem}.mtl",
+        "checker": f"{stem}_checker.png",
+        "glb": f"{stem}.glb",
+        "uv": f"{stem}_uv.png",
+        "report": "report.json",
+    }
+    with staged_outputs(outdir) as stage:
         checker = checker_image(1024)
         checker.save(stage / names["checker"], format="PNG")
         (stage / names["mtl"]).write_text(
@@ -383,15 +374,28 @@ def save_atlas(atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: in
         (stage / names["report"]).write_text(
             json.dumps(atlas.report(), indent=1, sort_keys=False) + "\n", encoding="utf-8"
         )
-        written = []
+    return [outdir / name for name in names.values()]
+
+
+@contextlib.contextmanager
+def staged_outputs(outdir: str | os.PathLike) -> Iterator[Path]:
+    """Yield a staging folder inside ``outdir``; move everything in it into ``outdir`` only if
+    the block succeeds, all or nothing (also on Ctrl-C between two moves)."""
+    import shutil
+
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=".segparam-", dir=outdir))
+    try:
+        yield stage
+        written: list[Path] = []
         try:
-            for name in names.values():  # all files exist: move them into place
-                os.replace(stage / name, outdir / name)
-                written.append(outdir / name)
-        except BaseException:  # e.g. Ctrl-C between two moves: all or nothing
+            for path in sorted(stage.iterdir()):  # every file exists: move them into place
+                os.replace(path, outdir / path.name)
+                written.append(outdir / path.name)
+        except BaseException:
             for done in written:
                 done.unlink(missing_ok=True)
             raise
-        return written
     finally:
         shutil.rmtree(stage, ignore_errors=True)
