@@ -272,7 +272,8 @@ def process_one(
         skipped = _done_row(path, folder, config_dict, seed)
         if skipped is not None:
             return skipped
-        config = config_from_dict(config_dict)
+        # One task per mesh already keeps every worker busy: no process pool inside a task.
+        config = config_from_dict(config_dict).replace(split={"n_jobs": 1})
         try:
             input_sha = _file_sha256(path)
         except OSError:

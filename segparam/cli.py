@@ -17,11 +17,24 @@ from .errors import SegparamError
 log = logging.getLogger("segparam")
 
 
-def _data(name: str) -> Path:
-    """A sample mesh from the top-level ``data/`` folder (installed as ``segparam.data``)."""
+def _bundled(folder: str, name: str) -> Path:
+    """A file of the top-level ``data/`` or ``pipelines/`` folder.
+
+    Installed, they are the packages ``segparam.data`` and ``segparam.pipelines``; when segparam
+    is imported from a source checkout (e.g. ``python -m pytest`` in the repository), they are
+    the folders beside the package.
+    """
     from importlib.resources import files
 
-    return Path(str(files("segparam.data").joinpath(name)))
+    try:
+        return Path(str(files(f"segparam.{folder}").joinpath(name)))
+    except ModuleNotFoundError:
+        return Path(__file__).resolve().parent.parent / folder / name
+
+
+def _data(name: str) -> Path:
+    """A sample mesh from the top-level ``data/`` folder."""
+    return _bundled("data", name)
 
 
 DEFAULT_CHART_NAME = "brain_parcel.obj"
@@ -62,8 +75,6 @@ DEFAULT_MESH_NAME = "brain.obj"
 
 def _resolve_config(value: str | None):
     """``--config``: a TOML path, or the name of a bundled pipeline (``default``, ``brain``...)."""
-    from importlib.resources import files
-
     from .errors import ConfigError
     from .pipeline import PipelineConfig, load_config
 
@@ -71,7 +82,7 @@ def _resolve_config(value: str | None):
         return PipelineConfig()
     path = Path(value)
     if path.suffix != ".toml" and not path.exists():
-        bundled = Path(str(files("segparam.pipelines").joinpath(f"{value}.toml")))
+        bundled = _bundled("pipelines", f"{value}.toml")
         if not bundled.exists():
             names = sorted(p.stem for p in bundled.parent.glob("*.toml"))
             raise ConfigError(f"no pipeline named {value!r}; bundled: {', '.join(names)}")

@@ -13,10 +13,12 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components as _cc
 
 from .errors import ConfigError, InvalidMeshError
@@ -28,6 +30,10 @@ from .segment import face_affinity, fiedler_bisect, is_disk
 log = logging.getLogger(__name__)
 
 __all__ = ["Chart", "ChartSet", "SplitConfig", "parameterize_charts", "project_chart"]
+
+
+#: Smaller meshes are parameterized in this process: starting workers costs about a second.
+PARALLEL_MIN_FACES = 100_000
 
 
 @dataclass(frozen=True)
@@ -44,6 +50,9 @@ class SplitConfig:
         Angle-distortion target: a bijective chart above it is split too (None: no target).
     min_faces : int
         Pieces with fewer faces skip the solver and use the planar projection.
+    n_jobs : int
+        Worker processes for meshes of at least ``PARALLEL_MIN_FACES`` faces (0: one per CPU,
+        1: none). Charts are independent, so the result does not depend on it.
     """
 
     method: str = "hessian"
@@ -51,6 +60,7 @@ class SplitConfig:
     max_depth: int = 6
     max_distortion: float | None = None
     min_faces: int = 8
+    n_jobs: int = 0
 
     def __post_init__(self) -> None:
         if self.max_depth < 0:
@@ -59,6 +69,8 @@ class SplitConfig:
             raise ConfigError(f"max_distortion is {self.max_distortion}; it must be >= 1")
         if self.min_faces < 1:
             raise ConfigError(f"min_faces is {self.min_faces}; it must be >= 1")
+        if self.n_jobs < 0:
+            raise ConfigError(f"n_jobs is {self.n_jobs}; it must be >= 0 (0: one per CPU)")
 
 
 @dataclass(frozen=True)
@@ -181,38 +193,109 @@ def parameterize_charts(
     center, size = unit_frame(V)
     V = (V - center) / size  # scale-free; chart uvs are scaled back below
     n_src = int(labels.max()) + 1
-    W = None  # the crease-aware face affinity, built on the first chart that must be split
     order = np.argsort(labels, kind="stable")
     bounds = np.searchsorted(labels[order], np.arange(n_src + 1))
+    sources = [order[bounds[s] : bounds[s + 1]] for s in range(n_src)]
+    jobs = cfg.n_jobs or os.cpu_count() or 1
+    parallel = jobs > 1 and n_src > 1 and len(F) >= PARALLEL_MIN_FACES
+    # The crease-aware face affinity splits failing charts. It is normalized over the whole mesh,
+    # so it is built here once (lazily when serial) and each chart gets its restriction: the
+    # result does not depend on n_jobs.
+    W = face_affinity(V, F) if parallel else None
+
+    def task(src: int) -> tuple:
+        faces = sources[src]
+        vertices, local_F = _submesh(F, faces)
+        W_src = None if W is None else W[faces][:, faces]
+        return V[vertices], local_F, W_src, src
+
+    results: dict[int, tuple[list[Chart], bool]] = {}
+    if parallel:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        ctx = multiprocessing.get_context("spawn")  # no fork after BLAS threads have started
+        by_size = sorted(range(n_src), key=lambda s: -len(sources[s]))  # big ones first
+        with ProcessPoolExecutor(max_workers=min(jobs, n_src), mp_context=ctx) as pool:
+            futures = {pool.submit(_solve_source, *task(s), cfg, seed): s for s in by_size}
+            try:
+                for done, future in enumerate(as_completed(futures), 1):
+                    results[futures[future]] = future.result()
+                    if progress is not None:
+                        progress(done)
+            except BaseException:
+                pool.shutdown(cancel_futures=True)
+                raise
+    else:
+        cache: list[sp.csr_matrix] = []
+
+        def affinity_of(src: int):  # built on the first chart that must be split
+            def restricted() -> sp.csr_matrix:
+                if not cache:
+                    cache.append(face_affinity(V, F))
+                return cache[0][sources[src]][:, sources[src]]
+
+            return restricted
+
+        for src in range(n_src):  # loop over charts
+            Vs, Fs, _, _ = task(src)
+            results[src] = _solve_source(Vs, Fs, affinity_of(src), src, cfg, seed)
+            if progress is not None:
+                progress(src + 1)
+
     charts: list[Chart] = []
     splits = np.zeros(n_src, dtype=np.int64)
     first = np.zeros(n_src, dtype=bool)
-    for src in range(n_src):  # loop over charts
-        stack = [(order[bounds[src] : bounds[src + 1]], 0)]
-        pieces = 0
-        while stack:
-            faces, depth = stack.pop()
-            chart = _try_piece(V, F, faces, src, depth, cfg, seed)
-            if depth == 0:
-                first[src] = chart is not None and chart.method != "projection"
-            if chart is not None:
-                charts.append(dataclasses.replace(chart, uv=chart.uv * size))
-                pieces += 1
-                continue
-            if W is None:
-                W = face_affinity(V, F)
-            sub = W[faces][:, faces]
-            n_comp, comp = _cc(sub, directed=False)
-            if n_comp > 1:
-                parts = [faces[comp == k] for k in range(n_comp)]
-            else:
-                side = fiedler_bisect(sub, seed=seed)
-                parts = [faces[side], faces[~side]]
-            stack.extend((p, depth + 1) for p in reversed(parts) if len(p))
-        splits[src] = pieces - 1
-        if progress is not None:
-            progress(src + 1)
+    for src in range(n_src):  # back to mesh indices and units
+        faces = sources[src]
+        vertices, _ = _submesh(F, faces)
+        pieces, first[src] = results[src]
+        splits[src] = len(pieces) - 1
+        charts.extend(
+            dataclasses.replace(
+                c, faces=faces[c.faces], vertices=vertices[c.vertices], uv=c.uv * size
+            )
+            for c in pieces
+        )
     return ChartSet(charts=tuple(charts), splits=splits, first_pass_bijective=first)
+
+
+def _solve_source(
+    V: np.ndarray,
+    F: np.ndarray,
+    W: sp.csr_matrix | Callable[[], sp.csr_matrix],
+    src: int,
+    cfg: SplitConfig,
+    seed: int,
+) -> tuple[list[Chart], bool]:
+    """Map one segmentation chart, bisecting the pieces that fail (the per-chart task).
+
+    ``V, F`` are the chart's own vertices and faces; ``W`` its face affinity, or a function that
+    builds it (called only if the chart must be split). Returns the bijective pieces, in
+    chart-local indices, and whether the first try succeeded.
+    """
+    stack = [(np.arange(len(F)), 0)]
+    pieces: list[Chart] = []
+    first = False
+    while stack:
+        faces, depth = stack.pop()
+        chart = _try_piece(V, F, faces, src, depth, cfg, seed)
+        if depth == 0:
+            first = chart is not None and chart.method != "projection"
+        if chart is not None:
+            pieces.append(chart)
+            continue
+        if callable(W):
+            W = W()
+        sub = W[faces][:, faces]
+        n_comp, comp = _cc(sub, directed=False)
+        if n_comp > 1:
+            parts = [faces[comp == k] for k in range(n_comp)]
+        else:
+            side = fiedler_bisect(sub, seed=seed)
+            parts = [faces[side], faces[~side]]
+        stack.extend((p, depth + 1) for p in reversed(parts) if len(p))
+    return pieces, first
 
 
 def _try_piece(

@@ -81,3 +81,23 @@ def test_config_errors():
         SplitConfig(max_depth=-1)
     with pytest.raises(ConfigError, match="max_distortion"):
         SplitConfig(max_distortion=0.5)
+    with pytest.raises(ConfigError, match="n_jobs"):
+        SplitConfig(n_jobs=-1)
+
+
+def test_worker_processes_give_the_same_charts(monkeypatch):
+    import segparam.split as split
+
+    monkeypatch.setattr(split, "PARALLEL_MIN_FACES", 0)
+    V, F = plate_with_holes()
+    seg = segment(V, F)
+    serial = parameterize_charts(V, F, seg.labels, config=SplitConfig(n_jobs=1))
+    done = []
+    parallel = parameterize_charts(
+        V, F, seg.labels, config=SplitConfig(n_jobs=2), progress=done.append
+    )
+    assert done[-1] == seg.n_charts
+    assert len(serial.charts) == len(parallel.charts)
+    assert np.array_equal(serial.splits, parallel.splits)
+    for a, b in zip(serial.charts, parallel.charts, strict=True):
+        assert np.array_equal(a.faces, b.faces) and np.array_equal(a.uv, b.uv)
