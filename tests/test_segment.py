@@ -117,3 +117,20 @@ def test_integrated_curvature_ignores_noise_but_keeps_real_curvature():
     assert integrated_curvature(V, F) < 0.2 * raw
     Vs, Fs = icosphere()
     assert integrated_curvature(Vs, Fs) == pytest.approx(4 * np.pi)
+
+
+def test_border_smoothing_shortens_the_cuts():
+    from segparam.mesh import face_adjacency
+    from segparam.synthetic import brain_like_surface
+
+    V, F = brain_like_surface(6000, seed=3)
+    pairs, _ = face_adjacency(F)
+
+    def cut_edges(smoothing):
+        # A small proxy graph: labels carried back from proxy cells give saw-tooth borders.
+        cfg = SegmentConfig(n_charts=8, smoothing=smoothing, proxy_faces=600)
+        seg = segment(V, F, config=cfg)
+        assert_valid(F, seg)
+        return int((seg.labels[pairs[:, 0]] != seg.labels[pairs[:, 1]]).sum())
+
+    assert cut_edges(4) < 0.95 * cut_edges(0)  # measured: 325 vs 360
