@@ -541,6 +541,8 @@ def cmd_batch(args: argparse.Namespace) -> int:
         raise SegparamError(f"--workers must be at least 1, not {args.workers}")
     config = _config_from_args(args)
     _import_dask()
+    # Dask's own INFO chatter (scheduler start, workers retired) is noise on a terminal.
+    logging.getLogger("distributed").setLevel(logging.WARNING)
     outdir = Path(args.output)
     paths = expand_inputs(args.inputs, recursive=args.recursive, exclude=outdir)
     bar = None
