@@ -26,8 +26,10 @@ __all__ = [
     "unit_frame",
     "face_adjacency",
     "face_areas",
+    "face_neighbors",
     "face_normals",
     "genus",
+    "is_disk",
     "is_edge_manifold",
     "is_vertex_manifold",
     "vertex_adjacency",
@@ -408,6 +410,40 @@ def boundary_loops(F: np.ndarray) -> list[np.ndarray]:
     loops = [verts[chunk] for chunk in np.split(order, bounds)]
     loops.sort(key=len, reverse=True)
     return loops
+
+
+def face_neighbors(F: np.ndarray) -> np.ndarray:
+    """The face across each edge of every face.
+
+    Returns
+    -------
+    (m, 3) int64 ndarray
+        ``N[f, k]`` is the face sharing edge ``(F[f, k], F[f, (k + 1) % 3])`` with ``f``; -1 on
+        boundary edges and on edges with more than two faces.
+    """
+    m = len(F)
+    _, h2e = edges(F)
+    count = np.bincount(h2e)
+    out = np.full(3 * m, -1, dtype=np.int64)
+    two = np.flatnonzero(count[h2e] == 2)
+    pairs = two[np.argsort(h2e[two], kind="stable")].reshape(-1, 2)  # the two halves of an edge
+    out[pairs[:, 0]] = pairs[:, 1] // 3
+    out[pairs[:, 1]] = pairs[:, 0] // 3
+    return out.reshape(m, 3)
+
+
+def is_disk(F: np.ndarray, *, holes: bool = True) -> bool:
+    """True if the faces form one connected, manifold, consistently oriented genus-0 surface with
+    at least one boundary loop (exactly one when ``holes`` is False): a disk, possibly with holes.
+    """
+    if len(F) == 0 or not is_edge_manifold(F) or not is_vertex_manifold(F).all():
+        return False  # a non-manifold vertex on a boundary is where a chart touches itself
+    if connected_components(F)[0] != 1:
+        return False
+    b = len(boundary_loops(F)) if len(boundary_edges(F)) else 0
+    if b == 0 or (not holes and b != 1):
+        return False
+    return euler_characteristic(F) == 2 - b
 
 
 def genus(F: np.ndarray) -> int:

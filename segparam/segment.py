@@ -29,11 +29,11 @@ from .mesh import (
     boundary_edges,
     check_mesh,
     edges,
-    euler_characteristic,
     face_adjacency,
     face_areas,
+    face_neighbors,
     face_normals,
-    is_vertex_manifold,
+    is_disk,
     unit_frame,
     vertex_adjacency,
 )
@@ -46,7 +46,6 @@ __all__ = [
     "face_affinity",
     "fiedler_bisect",
     "integrated_curvature",
-    "is_disk",
     "segment",
 ]
 
@@ -176,25 +175,6 @@ def integrated_curvature(V: np.ndarray, F: np.ndarray, *, passes: int = 2) -> fl
     return float(np.abs(K).sum())
 
 
-def is_disk(F: np.ndarray) -> bool:
-    """True if the faces form one connected, manifold, genus-0 surface with a boundary."""
-    if len(F) == 0:
-        return False
-    W = _face_graph(F)
-    if _cc(W, directed=False)[0] != 1:
-        return False
-    B = boundary_edges(F)
-    if len(B) == 0:
-        return False
-    nb = len(np.unique(B))
-    if nb != len(B) or not is_vertex_manifold(F).all():
-        return False  # a pinched boundary: a vertex where the chart touches itself
-    from .mesh import boundary_loops
-
-    b = len(boundary_loops(F))
-    return euler_characteristic(F) == 2 - b
-
-
 def _face_graph(F: np.ndarray) -> sp.csr_matrix:
     pairs, _ = face_adjacency(F)
     m = len(F)
@@ -270,17 +250,7 @@ def _smooth_boundaries(F: np.ndarray, labels: np.ndarray, passes: int) -> np.nda
     """Majority filter on chart labels: a face whose edge neighbours mostly belong to one other
     chart joins it. Clustering on faces leaves saw-tooth chart borders; straighter borders mean
     shorter seams and charts that pack tighter."""
-    m = len(F)
-    pairs, _ = face_adjacency(F)
-    # Up to three edge neighbours per face; -1 where there is none (boundary or fin).
-    nb = np.full((m, 3), -1, dtype=np.int64)
-    src = np.r_[pairs[:, 0], pairs[:, 1]]
-    dst = np.r_[pairs[:, 1], pairs[:, 0]]
-    order = np.argsort(src, kind="stable")
-    src, dst = src[order], dst[order]
-    slot = np.arange(len(src)) - np.searchsorted(src, src)
-    keep = slot < 3
-    nb[src[keep], slot[keep]] = dst[keep]
+    nb = face_neighbors(F)  # -1 where there is no neighbour
     for _ in range(passes):
         L = np.where(nb >= 0, labels[np.maximum(nb, 0)], -1)
         own = labels

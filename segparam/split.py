@@ -22,10 +22,10 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components as _cc
 
 from .errors import ConfigError, InvalidMeshError
-from .mesh import check_mesh, unit_frame
+from .mesh import check_mesh, face_areas, face_normals, is_disk, unit_frame
 from .parameterize import MIN_POINTS, parameterize_chart
 from .quality import ChartQuality, chart_quality
-from .segment import face_affinity, fiedler_bisect, is_disk
+from .segment import face_affinity, fiedler_bisect
 
 log = logging.getLogger(__name__)
 
@@ -140,10 +140,7 @@ def project_chart(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     -------
     (n, 2) float64 ndarray
     """
-    from .mesh import face_normals
-
-    areas = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
-    n = (face_normals(V, F) * areas[:, None]).sum(axis=0)
+    n = (face_normals(V, F) * face_areas(V, F)[:, None]).sum(axis=0)
     if np.linalg.norm(n) < 1e-300:
         n = np.linalg.svd(V - V.mean(axis=0), full_matrices=False)[2][-1]
     n = n / np.linalg.norm(n)

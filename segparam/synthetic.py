@@ -329,25 +329,9 @@ def brain_like_surface(
 # topology helpers
 
 
-def _face_neighbors(F: np.ndarray) -> np.ndarray:
-    """(m, 3) neighbour of each face across edges 01, 12, 20 of a closed edge-manifold mesh."""
-    # segparam.mesh.face_adjacency gives unordered pairs; the region cleaning needs them per edge
-    m = len(F)
-    _, h2e = mesh.edges(F)
-    pairs = np.argsort(h2e, kind="stable").reshape(-1, 2)  # two half-edges per edge
-    adj = np.empty(3 * m, dtype=np.int64)
-    adj[pairs[:, 0]] = pairs[:, 1] // 3
-    adj[pairs[:, 1]] = pairs[:, 0] // 3
-    return adj.reshape(m, 3)
-
-
 def _is_disk(F: np.ndarray) -> bool:
-    """Connected, manifold, oriented, Euler characteristic 1 and one boundary loop."""
-    if len(F) == 0 or not mesh.is_edge_manifold(F) or not mesh.is_vertex_manifold(F).all():
-        return False
-    if mesh.connected_components(F)[0] != 1 or mesh.euler_characteristic(F) != 1:
-        return False
-    return len(mesh.boundary_loops(F)) == 1
+    """A topological disk with exactly one boundary loop."""
+    return mesh.is_disk(F, holes=False)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -437,7 +421,7 @@ def _brain_parcels(
         hot_radius=0.3 * np.sqrt(mean_faces * 0.45),
         hot_factor=2.0,
     )
-    adj = _face_neighbors(F)
+    adj = mesh.face_neighbors(F)
     C = V[F].mean(axis=1)
     i = np.repeat(np.arange(len(F)), 3)
     j = adj.ravel()

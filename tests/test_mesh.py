@@ -129,3 +129,20 @@ def test_normals_and_areas():
     Vt, Ft = tetrahedron()
     centroid_dir = Vt[Ft].mean(1) - Vt.mean(0)
     assert (np.einsum("ij,ij->i", mesh.face_normals(Vt, Ft), centroid_dir) > 0).all()
+
+
+def test_face_neighbors_and_is_disk():
+    V, F = tri_grid(5, 4)
+    N = mesh.face_neighbors(F)
+    assert (N == -1).sum() == len(mesh.boundary_edges(F))
+    f, k = np.nonzero(N >= 0)
+    # The neighbour across edge (a, b) holds the same edge, reversed.
+    a, b = F[f, k], F[f, (k + 1) % 3]
+    G = F[N[f, k]]
+    assert ((G == a[:, None]).any(1) & (G == b[:, None]).any(1)).all()
+    assert mesh.is_disk(F) and mesh.is_disk(F, holes=False)
+    Va, Fa = annulus()
+    assert mesh.is_disk(Fa) and not mesh.is_disk(Fa, holes=False)
+    assert not mesh.is_disk(tetrahedron()[1])  # closed
+    assert not mesh.is_disk(torus()[1])
+    assert not mesh.is_disk(np.array([[0, 1, 2], [0, 3, 4]]))  # bowtie

@@ -4,8 +4,8 @@ import trimesh
 from meshes import plate_with_holes, tri_grid
 
 from segparam.errors import ConfigError
-from segparam.mesh import connected_components
-from segparam.segment import SegmentConfig, face_affinity, fiedler_bisect, is_disk, segment
+from segparam.mesh import connected_components, is_disk
+from segparam.segment import SegmentConfig, face_affinity, fiedler_bisect, segment
 
 
 def icosphere():

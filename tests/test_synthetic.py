@@ -138,7 +138,7 @@ def test_is_disk_on_small_meshes():
 
 def test_face_neighbors_match_mesh_face_adjacency(surface):
     _, F = surface
-    adj = synthetic._face_neighbors(F)
+    adj = mesh.face_neighbors(F)
     pairs = np.sort(np.column_stack([np.repeat(np.arange(len(F)), 3), adj.ravel()]), axis=1)
     expected, _ = mesh.face_adjacency(F)
     assert np.array_equal(np.unique(pairs, axis=0), np.unique(expected, axis=0))
