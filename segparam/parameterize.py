@@ -47,7 +47,7 @@ from .mesh import (
     vertex_adjacency,
     vertex_normals,
 )
-from .quality import ChartQuality, chart_quality, jacobians, signed_areas
+from .quality import ChartQuality, chart_quality, jacobians, signed_areas, triangle_frames
 
 log = logging.getLogger(__name__)
 
@@ -552,16 +552,7 @@ def _gradient_operator(V: np.ndarray, F: np.ndarray) -> sp.csr_matrix:
     """``D`` (2m x n): row ``2t + k`` gives column ``k`` of triangle ``t``'s Jacobian from the
     per-vertex values of one uv coordinate (see :func:`segparam.quality.jacobians`)."""
     m = len(F)
-    e1 = V[F[:, 1]] - V[F[:, 0]]
-    e2 = V[F[:, 2]] - V[F[:, 0]]
-    len1 = np.linalg.norm(e1, axis=1)
-    x = e1 / len1[:, None]
-    y = np.cross(np.cross(e1, e2), x)
-    y /= np.linalg.norm(y, axis=1, keepdims=True)
-    P = np.zeros((m, 2, 2))
-    P[:, 0, 0] = len1
-    P[:, 0, 1] = (e2 * x).sum(axis=1)
-    P[:, 1, 1] = (e2 * y).sum(axis=1)
+    P = triangle_frames(V, F)
     Pinv = np.linalg.inv(P)  # J = [q1 q2] @ Pinv, q_j = uv[F_j] - uv[F_0]
     rows = np.repeat(2 * np.arange(m)[:, None] + np.arange(2), 3, axis=1)  # (m, 2) -> (m, 6)
     rows = rows.reshape(m, 2, 3)

@@ -32,6 +32,7 @@ __all__ = [
     "distortion",
     "jacobians",
     "signed_areas",
+    "triangle_frames",
 ]
 
 #: Relative uv area below which a triangle counts as degenerate.
@@ -97,6 +98,27 @@ def signed_areas(uv: np.ndarray, F: np.ndarray) -> np.ndarray:
     return 0.5 * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
 
 
+def triangle_frames(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Edge vectors of every triangle in its own orthonormal frame (x along the first edge).
+
+    Returns
+    -------
+    (m, 2, 2) float64 ndarray
+        Columns are ``V[F1] - V[F0]`` and ``V[F2] - V[F0]`` in the triangle's frame.
+    """
+    e1 = V[F[:, 1]] - V[F[:, 0]]
+    e2 = V[F[:, 2]] - V[F[:, 0]]
+    len1 = np.linalg.norm(e1, axis=1)
+    x = e1 / len1[:, None]
+    y = np.cross(np.cross(e1, e2), x)
+    y /= np.linalg.norm(y, axis=1, keepdims=True)
+    P = np.zeros((len(F), 2, 2))
+    P[:, 0, 0] = len1
+    P[:, 0, 1] = (e2 * x).sum(axis=1)
+    P[:, 1, 1] = (e2 * y).sum(axis=1)
+    return P
+
+
 def jacobians(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """Jacobian of the affine map from each 3-D triangle (in its own orthonormal frame) to uv.
 
@@ -105,19 +127,8 @@ def jacobians(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> np.ndarray:
     (m, 2, 2) float64 ndarray
         ``J[f] @ p`` maps a vector ``p`` of triangle ``f``'s frame to uv; ``det J < 0`` on flips.
     """
-    e1 = V[F[:, 1]] - V[F[:, 0]]
-    e2 = V[F[:, 2]] - V[F[:, 0]]
-    len1 = np.linalg.norm(e1, axis=1)
-    x = e1 / len1[:, None]
-    n = np.cross(e1, e2)
-    y = np.cross(n, x)
-    y /= np.linalg.norm(y, axis=1, keepdims=True)
-    P = np.zeros((len(F), 2, 2))
-    P[:, 0, 0] = len1
-    P[:, 0, 1] = (e2 * x).sum(axis=1)
-    P[:, 1, 1] = (e2 * y).sum(axis=1)
     Q = np.stack([uv[F[:, 1]] - uv[F[:, 0]], uv[F[:, 2]] - uv[F[:, 0]]], axis=2)
-    return Q @ np.linalg.inv(P)
+    return Q @ np.linalg.inv(triangle_frames(V, F))
 
 
 def singular_values(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
