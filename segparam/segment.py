@@ -175,13 +175,6 @@ def integrated_curvature(V: np.ndarray, F: np.ndarray, *, passes: int = 2) -> fl
     return float(np.abs(K).sum())
 
 
-def _face_graph(F: np.ndarray) -> sp.csr_matrix:
-    pairs, _ = face_adjacency(F)
-    m = len(F)
-    ones = np.ones(len(pairs))
-    return sp.coo_matrix((ones, (pairs[:, 0], pairs[:, 1])), shape=(m, m)).tocsr()
-
-
 def fiedler_bisect(W: np.ndarray | sp.spmatrix, *, seed: int = 0) -> np.ndarray:
     """Split a connected graph in two halves by the median of its Fiedler vector.
 
@@ -264,24 +257,26 @@ def _smooth_boundaries(F: np.ndarray, labels: np.ndarray, passes: int) -> np.nda
     return labels
 
 
-def _relabel_components(F: np.ndarray, labels: np.ndarray, W: sp.csr_matrix) -> np.ndarray:
-    """Split every label into its edge-connected components (one new label each)."""
-    m = len(F)
-    pairs, _ = face_adjacency(F)
-    same = labels[pairs[:, 0]] == labels[pairs[:, 1]]
-    G = sp.coo_matrix((np.ones(same.sum()), (pairs[same, 0], pairs[same, 1])), shape=(m, m)).tocsr()
-    _, comp = _cc(G, directed=False)
+def _relabel_components(labels: np.ndarray, W: sp.csr_matrix) -> np.ndarray:
+    """Split every label into its edge-connected components (one new label each).
+
+    ``W``'s pattern is the face adjacency (every affinity is positive).
+    """
+    C = W.tocoo()
+    same = labels[C.row] == labels[C.col]
+    G = sp.coo_matrix((np.ones(same.sum()), (C.row[same], C.col[same])), shape=W.shape)
+    _, comp = _cc(G.tocsr(), directed=False)
     return np.unique(comp, return_inverse=True)[1].ravel().astype(np.int64)
 
 
-def _merge_small(F: np.ndarray, labels: np.ndarray, W: sp.csr_matrix, min_faces: int) -> np.ndarray:
+def _merge_small(labels: np.ndarray, W: sp.csr_matrix, min_faces: int) -> np.ndarray:
     """Merge charts smaller than ``min_faces`` into the neighbour they share most affinity with."""
+    C = W.tocoo()
     for _ in range(8):  # a few passes; each merges every small chart at once
         size = np.bincount(labels)
         small = size[labels] < min_faces
         if not small.any():
             break
-        C = W.tocoo()
         li, lj = labels[C.row], labels[C.col]
         mask = small[C.row] & (li != lj)
         if not mask.any():
@@ -401,9 +396,9 @@ def segment(
         offset += k
     labels = np.unique(labels, return_inverse=True)[1].ravel().astype(np.int64)
     labels = _smooth_boundaries(F, labels, cfg.smoothing)
-    labels = _relabel_components(F, labels, W)
+    labels = _relabel_components(labels, W)
     min_faces = max(2, int(0.1 * m / max(target, 1)))
-    labels = _merge_small(F, labels, W, min_faces)
+    labels = _merge_small(labels, W, min_faces)
     labels = _make_disks(F, labels, W, seed)
     n = int(labels.max()) + 1
     log.info("segment: %d faces -> %d charts (target %d)", m, n, target)
