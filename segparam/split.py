@@ -193,6 +193,7 @@ def parameterize_charts(
     order = np.argsort(labels, kind="stable")
     bounds = np.searchsorted(labels[order], np.arange(n_src + 1))
     sources = [order[bounds[s] : bounds[s + 1]] for s in range(n_src)]
+    submeshes = [_submesh(F, faces) for faces in sources]  # (mesh vertices, local faces)
     jobs = cfg.n_jobs or os.cpu_count() or 1
     parallel = jobs > 1 and n_src > 1 and len(F) >= PARALLEL_MIN_FACES
     # The crease-aware face affinity splits failing charts. It is normalized over the whole mesh,
@@ -202,7 +203,7 @@ def parameterize_charts(
 
     def task(src: int) -> tuple:
         faces = sources[src]
-        vertices, local_F = _submesh(F, faces)
+        vertices, local_F = submeshes[src]
         W_src = None if W is None else W[faces][:, faces]
         return V[vertices], local_F, W_src, src
 
@@ -245,7 +246,7 @@ def parameterize_charts(
     first = np.zeros(n_src, dtype=bool)
     for src in range(n_src):  # back to mesh indices and units
         faces = sources[src]
-        vertices, _ = _submesh(F, faces)
+        vertices = submeshes[src][0]
         pieces, first[src] = results[src]
         splits[src] = len(pieces) - 1
         charts.extend(
