@@ -286,19 +286,20 @@ def is_vertex_manifold(F: np.ndarray, n_vertices: int | None = None) -> np.ndarr
         True also for unreferenced vertices.
     """
     n = int(F.max()) + 1 if n_vertices is None else n_vertices
-    # Node (v, w) of v's link, for every corner of v: its two other vertices.
+    # Node (v, w) of v's link is the end v of the undirected edge vw: node 2 e + (v == E[e, 1]).
+    # Corner k of face f (vertex v) joins the nodes of its two edges, half-edges 3 f + k (v -> a)
+    # and 3 f + k - 1 (b -> v).
+    E, h2e = edges(F)
     v = F.ravel()
-    a = np.roll(F, -1, axis=1).ravel()
-    b = np.roll(F, -2, axis=1).ravel()
-    keys_a = v * n + a
-    keys_b = v * n + b
-    keys, inv = np.unique(np.concatenate([keys_a, keys_b]), return_inverse=True)
-    m = len(v)
-    G = sp.coo_matrix((np.ones(m), (inv[:m], inv[m:])), shape=(len(keys), len(keys)))
-    _, labels = _cc(G, directed=False)
-    owner = keys // n
-    pieces = np.unique(np.stack([owner, labels], axis=1), axis=0)[:, 0]
-    return np.bincount(pieces, minlength=n) <= 1
+    e_next = h2e
+    e_prev = h2e.reshape(-1, 3)[:, [2, 0, 1]].ravel()
+    node_a = 2 * e_next + (E[e_next, 1] == v)
+    node_b = 2 * e_prev + (E[e_prev, 1] == v)
+    G = sp.coo_matrix((np.ones(len(v)), (node_a, node_b)), shape=(2 * len(E), 2 * len(E)))
+    n_labels, labels = _cc(G, directed=False)
+    owner = np.empty(n_labels, dtype=np.int64)
+    owner[labels] = E.ravel()  # node 2 e + s belongs to vertex E[e, s]
+    return np.bincount(owner, minlength=n) <= 1
 
 
 def vertex_adjacency(F: np.ndarray, n_vertices: int) -> sp.csr_matrix:

@@ -109,6 +109,34 @@ def test_bowtie_vertex_is_not_manifold():
     assert not manifold[0] and manifold[1:].all()
 
 
+def _fans_by_walk(F, v):
+    """Reference: count the fans around v by a plain union-find over its corners' link edges."""
+    parent = {}
+
+    def find(x):
+        while parent.setdefault(x, x) != x:
+            x = parent[x]
+        return x
+
+    for f in F:
+        if v in f:
+            k = list(f).index(v)
+            a, b = find(f[(k + 1) % 3]), find(f[(k + 2) % 3])
+            parent[a] = b
+    return len({find(x) for x in list(parent)})
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_vertex_manifold_matches_a_per_vertex_walk(seed):
+    # Random soups with shared vertices: bowties, fans split in two, non-manifold edges.
+    rng = np.random.default_rng(seed)
+    F = rng.integers(0, 12, size=(25, 3))
+    F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])]
+    manifold = mesh.is_vertex_manifold(F, 12)
+    for v in range(12):
+        assert manifold[v] == (_fans_by_walk(F, v) <= 1), v
+
+
 def test_non_manifold_edge():
     F = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
     assert not mesh.is_edge_manifold(F)
