@@ -21,6 +21,7 @@ from segparam.parameterize import (
     parameterize_chart,
     vertex_weights,
 )
+from segparam.quality import signed_areas
 
 
 def test_plane_is_isometric_up_to_rigid_motion():
@@ -85,6 +86,29 @@ def test_arap_refine_keeps_an_isometric_map():
 
     uv = arap_refine(V, F, chart.uv, iterations=5)
     assert procrustes_residual(uv, chart.uv) < 1e-2 * np.ptp(chart.uv)
+
+
+def test_refinement_is_skipped_on_a_rigid_map_but_not_on_a_flipped_one():
+    from segparam.parameterize import _arap
+
+    V, F = tri_grid(8, 8)
+    uv = V[:, :2].copy()
+    same, steps = _arap(V, F, uv, iterations=10, tol=1e-4, min_decrease=0.01)
+    assert steps == 0 and np.array_equal(same, uv - uv[0])
+    # One interior vertex pushed across its neighbours: the map is nearly rigid by area but has
+    # flipped triangles, so the iterations still run and undo the flips.
+    centre = np.argmin(np.linalg.norm(V[:, :2] - V[:, :2].mean(axis=0), axis=1))
+    bent = uv.copy()
+    bent[centre] += 2.5 * np.linalg.norm(V[F[0, 1]] - V[F[0, 0]]) * np.array([1.0, 0.3])
+    fixed, steps = _arap(V, F, bent, iterations=10, tol=1e-4, min_decrease=0.01)
+    assert steps > 0
+    assert (signed_areas(bent, F) < 0).any() and (signed_areas(fixed, F) > 0).all()
+
+
+def test_solver_skips_refinement_of_a_developable_chart():
+    V, F = cylinder_patch()
+    chart = parameterize_chart(V, F)
+    assert chart.bijective and not chart.refined
 
 
 def test_pca_tangent_option_runs_and_is_recorded():
