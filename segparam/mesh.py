@@ -263,9 +263,12 @@ def boundary_edges(F: np.ndarray) -> np.ndarray:
     return _half_edges(F)[count[h2e] == 1]
 
 
-def is_edge_manifold(F: np.ndarray) -> bool:
-    """True if every edge has one or two faces and two faces of an edge traverse it oppositely."""
-    E, h2e = edges(F)
+def is_edge_manifold(F: np.ndarray, *, edge_index: tuple | None = None) -> bool:
+    """True if every edge has one or two faces and two faces of an edge traverse it oppositely.
+
+    ``edge_index`` is ``edges(F)`` when the caller already has it.
+    """
+    E, h2e = edges(F) if edge_index is None else edge_index
     count = np.bincount(h2e, minlength=len(E))
     if count.max(initial=0) > 2:
         return False
@@ -274,11 +277,15 @@ def is_edge_manifold(F: np.ndarray) -> bool:
     return bool(np.all((count == 1) | (forward == 1)))
 
 
-def is_vertex_manifold(F: np.ndarray, n_vertices: int | None = None) -> np.ndarray:
+def is_vertex_manifold(
+    F: np.ndarray, n_vertices: int | None = None, *, edge_index: tuple | None = None
+) -> np.ndarray:
     """Per vertex: True if its incident faces form one fan (a disk or half-disk).
 
     The link of vertex ``v`` is the graph of the opposite edges of its corners; ``v`` is manifold
     iff that graph is connected. All links are labelled at once by one connected-components call.
+
+    ``edge_index`` is ``edges(F)`` when the caller already has it.
 
     Returns
     -------
@@ -289,7 +296,7 @@ def is_vertex_manifold(F: np.ndarray, n_vertices: int | None = None) -> np.ndarr
     # Node (v, w) of v's link is the end v of the undirected edge vw: node 2 e + (v == E[e, 1]).
     # Corner k of face f (vertex v) joins the nodes of its two edges, half-edges 3 f + k (v -> a)
     # and 3 f + k - 1 (b -> v).
-    E, h2e = edges(F)
+    E, h2e = edges(F) if edge_index is None else edge_index
     v = F.ravel()
     e_next = h2e
     e_prev = h2e.reshape(-1, 3)[:, [2, 0, 1]].ravel()
@@ -370,18 +377,18 @@ def euler_characteristic(F: np.ndarray) -> int:
     return int(len(np.unique(F)) - len(E) + len(F))
 
 
-def boundary_loops(F: np.ndarray) -> list[np.ndarray]:
+def boundary_loops(F: np.ndarray, *, boundary: np.ndarray | None = None) -> list[np.ndarray]:
     """Ordered boundary loops, each following the face winding, longest first.
 
     Needs every boundary vertex to have one outgoing boundary half-edge (manifold boundary).
     Loops are ordered by Wyllie list ranking (pointer doubling), so there is no Python walk along
-    the boundary.
+    the boundary. ``boundary`` is ``boundary_edges(F)`` when the caller already has it.
 
     Returns
     -------
     list of (k,) int64 ndarray
     """
-    B = boundary_edges(F)
+    B = boundary_edges(F) if boundary is None else boundary
     if len(B) == 0:
         return []
     verts, idx = np.unique(B, return_inverse=True)

@@ -33,14 +33,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components as graph_components
 from scipy.spatial import cKDTree
 
 from .errors import InvalidMeshError
 from .linalg import smallest_eigenpairs
 from .mesh import (
-    boundary_edges,
     check_mesh,
-    connected_components,
+    edges,
     face_areas,
     is_edge_manifold,
     is_vertex_manifold,
@@ -153,15 +153,19 @@ def check_chart(V, F) -> tuple[np.ndarray, np.ndarray]:
         raise InvalidMeshError(
             f"chart has {int((~used).sum())} unreferenced vertices; every vertex needs a face"
         )
-    count, _ = connected_components(F)
+    edge_index = edges(F)
+    E = edge_index[0]
+    A = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
+    # Vertex-connected and vertex-manifold (checked below) implies connected through edges.
+    count = graph_components(A, directed=False, return_labels=False)
     if count != 1:
         raise InvalidMeshError(f"chart has {count} connected components; it must be one piece")
-    if not is_edge_manifold(F):
+    if not is_edge_manifold(F, edge_index=edge_index):
         raise InvalidMeshError("chart is not edge-manifold or not consistently oriented")
-    bad = ~is_vertex_manifold(F, n)
+    bad = ~is_vertex_manifold(F, n, edge_index=edge_index)
     if bad.any():
         raise InvalidMeshError(f"chart has {int(bad.sum())} non-manifold vertices")
-    if len(boundary_edges(F)) == 0:
+    if np.bincount(edge_index[1]).min() > 1:
         raise InvalidMeshError("chart is closed (no boundary); cut it before parameterizing")
     return V, F
 
@@ -177,6 +181,7 @@ def neighbourhoods(
     *,
     min_points: int = MIN_POINTS,
     extra: np.ndarray | None = None,
+    adjacency: sp.csr_matrix | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The neighbourhood ``N_i`` of every vertex: itself and its 1-ring, minimally extended.
 
@@ -192,6 +197,8 @@ def neighbourhoods(
     min_points : int
     extra : (n,) int ndarray, optional
         Points to add beyond ``max(min_points, 1-ring size)`` (see :func:`hessian_matrix`).
+    adjacency : (n, n) scipy.sparse.csr_matrix, optional
+        ``vertex_adjacency(F, n)``, when the caller already has it.
 
     Returns
     -------
@@ -200,7 +207,7 @@ def neighbourhoods(
         ``N_i = idx[ptr[i]:ptr[i + 1]]``, with ``i`` itself first.
     """
     n = len(V)
-    A = vertex_adjacency(F, n)
+    A = vertex_adjacency(F, n) if adjacency is None else adjacency
     deg = np.diff(A.indptr)
     rows = [np.arange(n), np.repeat(np.arange(n), deg)]
     cols = [np.arange(n), A.indices.astype(np.int64)]
@@ -465,7 +472,8 @@ def hessian_matrix(
     """
     extra = np.zeros(len(V), dtype=np.int64)
     check = None  # vertices whose neighbourhood changed: all of them at first
-    ptr, idx = neighbourhoods(V, F, min_points=min_points, extra=extra)
+    A = vertex_adjacency(F, len(V))
+    ptr, idx = neighbourhoods(V, F, min_points=min_points, extra=extra, adjacency=A)
     # Averaged-normal frames do not depend on N_i (only their rare flat-vertex fallback uses the
     # first N_i): they are computed once. PCA frames follow every extension.
     b1, b2 = tangent_frames(V, F, ptr, idx, tangent=tangent)
@@ -475,7 +483,7 @@ def hessian_matrix(
             break
         extra[bad] += 1
         check = np.flatnonzero(bad)
-        ptr, idx = neighbourhoods(V, F, min_points=min_points, extra=extra)
+        ptr, idx = neighbourhoods(V, F, min_points=min_points, extra=extra, adjacency=A)
         if tangent == "pca":
             b1, b2 = tangent_frames(V, F, ptr, idx, tangent=tangent)
     w = vertex_weights(V, F)

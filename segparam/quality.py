@@ -242,7 +242,7 @@ def chart_quality(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> ChartQuality:
     n_branch = int((interior_bad | boundary_bad).sum())
 
     n_cross = boundary_crossings(uv, B)
-    loops = boundary_loops(F)
+    loops = boundary_loops(F, boundary=B)
     areas = np.array([_loop_area(uv, loop) for loop in loops])
     if len(areas):
         outer = int(np.argmax(np.abs(areas)))
