@@ -60,8 +60,12 @@ VARIANTS = (
 # ---------------------------------------------------------------------------------------------
 
 
-def wavy_sheet(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """About ``n`` vertices of near-equilateral triangles on ``z = 0.1 sin(3x) cos(2y)``.
+def wavy_sheet(n: int, surface: str = "sheet") -> tuple[np.ndarray, np.ndarray]:
+    """About ``n`` vertices of near-equilateral triangles on a height field over ``[-1, 1]^2``.
+
+    ``surface="sheet"``: ``z = 0.1 sin(3x) cos(2y)``, nearly developable (the Hessian map is
+    already near-isometric and the ARAP refinement stops at once). ``surface="bump"``:
+    ``z = 0.5 exp(-2 (x^2 + y^2))``, doubly curved, so the refinement runs.
 
     Rows of ``nx`` points spaced ``h``, ``ny`` rows spaced ``h sqrt(3) / 2``, odd rows shifted by
     ``h / 2``, over ``[-1, 1]^2`` (up to half a cell); faces wound counter-clockwise.
@@ -72,7 +76,14 @@ def wavy_sheet(n: int) -> tuple[np.ndarray, np.ndarray]:
     j, i = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
     x = -1.0 + h * (i + 0.5 * (j % 2))
     y = -1.0 + (2.0 / (ny - 1)) * j  # row spacing ~ h sqrt(3) / 2 by the choice of nx, ny
-    V = np.stack([x.ravel(), y.ravel(), 0.1 * np.sin(3 * x.ravel()) * np.cos(2 * y.ravel())], 1)
+    x, y = x.ravel(), y.ravel()
+    if surface == "sheet":
+        z = 0.1 * np.sin(3 * x) * np.cos(2 * y)
+    elif surface == "bump":
+        z = 0.5 * np.exp(-2 * (x**2 + y**2))
+    else:
+        raise ValueError(f"unknown surface {surface!r}")
+    V = np.stack([x, y, z], 1)
 
     jj, ii = np.meshgrid(np.arange(ny - 1), np.arange(nx - 1), indexing="ij")
     jj, ii = jj.ravel(), ii.ravel()
@@ -90,11 +101,11 @@ def _maxrss_kb() -> int:
     return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)  # KB on Linux
 
 
-def one_size(n: int, seed: int = 0) -> dict:
-    """Child process: build the sheet, time the solver, report peak memory (JSON on stdout)."""
+def one_size(n: int, surface: str = "sheet", seed: int = 0) -> dict:
+    """Child process: build the surface, time the solver, report peak memory (JSON on stdout)."""
     from segparam.parameterize import HessianSolver
 
-    V, F = wavy_sheet(n)
+    V, F = wavy_sheet(n, surface)
     base = _maxrss_kb()
     t0 = time.perf_counter()
     solver = HessianSolver(V, F)
@@ -103,6 +114,7 @@ def one_size(n: int, seed: int = 0) -> dict:
     peak = _maxrss_kb()
     return {
         "n_target": n,
+        "surface": surface,
         "n_vertices": len(V),
         "n_faces": len(F),
         "nnz_K": int(solver.K.nnz),
@@ -131,9 +143,9 @@ def _rss_of(pid: int) -> int:
     return 0
 
 
-def run_size(n: int, *, timeout: float, mem_limit_gb: float) -> dict:
+def run_size(n: int, surface: str, *, timeout: float, mem_limit_gb: float) -> dict:
     """Run :func:`one_size` in a fresh interpreter; stop it past the time or memory limit."""
-    cmd = [sys.executable, os.path.abspath(__file__), "--one-size", str(n)]
+    cmd = [sys.executable, os.path.abspath(__file__), "--one-size", str(n), "--surface", surface]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     start, limit_kb, failure = time.perf_counter(), mem_limit_gb * 1024**2, None
     while True:
@@ -155,14 +167,16 @@ def run_size(n: int, *, timeout: float, mem_limit_gb: float) -> dict:
     return json.loads(out.strip().splitlines()[-1])
 
 
-def scaling(sizes: list[int], *, repeats: int, timeout: float, mem_limit_gb: float) -> list:
+def scaling(
+    sizes: list[int], surface: str, *, repeats: int, timeout: float, mem_limit_gb: float
+) -> list:
     best: dict[int, dict] = {}
     for r in range(repeats):
         for n in sizes:
             if n in best and "error" in best[n]:
                 continue  # a size that hit a limit is not run again
             print(f"  scaling: n={n} run {r + 1}/{repeats} ...", file=sys.stderr, flush=True)
-            row = run_size(n, timeout=timeout, mem_limit_gb=mem_limit_gb)
+            row = run_size(n, surface, timeout=timeout, mem_limit_gb=mem_limit_gb)
             row["runs"] = r + 1
             if n not in best or "error" in row or row["wall_s"] < best[n]["wall_s"]:
                 best[n] = row
@@ -173,7 +187,7 @@ def scaling(sizes: list[int], *, repeats: int, timeout: float, mem_limit_gb: flo
 def print_scaling(rows: list) -> None:
     head = (
         "vertices faces assemble_s eigen_s post_s refine_s wall_s peak_MB delta_MB "
-        "B/vertex bijective angle_dist"
+        "B/vertex bijective refined angle_dist"
     ).split()
     table = []
     for r in rows:
@@ -193,6 +207,7 @@ def print_scaling(rows: list) -> None:
                 f"{r['delta_rss_kb'] / 1024:.0f}",
                 f"{r['bytes_per_vertex']:.0f}",
                 "yes" if r["bijective"] else "no",
+                "yes" if r["refined"] else "no",
                 f"{r['angle_distortion']:.4f}",
             ]
         )
@@ -411,12 +426,16 @@ def main(argv: list[str] | None = None) -> int:
         "--quality-threads", type=int, default=1, help="BLAS threads in part 2 (0: no limit)"
     )
     p.add_argument("--part", choices=("all", "scaling", "quality"), default="all")
+    p.add_argument(
+        "--surfaces", default="sheet,bump", help="scaling surfaces: sheet (developable), bump"
+    )
+    p.add_argument("--surface", default="sheet", help=argparse.SUPPRESS)
     p.add_argument("--out", default="benchmarks/results/solver.json")
     p.add_argument("--one-size", type=int, default=None, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
 
     if args.one_size is not None:
-        print(json.dumps(one_size(args.one_size)))
+        print(json.dumps(one_size(args.one_size, args.surface)))
         return 0
 
     sizes_arg = args.sizes or (QUICK_SIZES if args.quick else DEFAULT_SIZES)
@@ -427,14 +446,21 @@ def main(argv: list[str] | None = None) -> int:
         "args": {**vars(args), "sizes": sizes, "parcels": n_parcels},
     }
     result["args"].pop("one_size")
+    result["args"].pop("surface")
 
     if args.part in ("all", "scaling"):
-        print(f"\nScaling: wavy near-equilateral sheet, best of {args.repeats} runs per size")
-        rows = scaling(
-            sizes, repeats=args.repeats, timeout=args.timeout, mem_limit_gb=args.mem_limit_gb
-        )
-        print_scaling(rows)
-        result["scaling"] = rows
+        result["scaling"] = []
+        for surface in args.surfaces.split(","):
+            print(f"\nScaling: {surface} (near-equilateral), best of {args.repeats} runs per size")
+            rows = scaling(
+                sizes,
+                surface,
+                repeats=args.repeats,
+                timeout=args.timeout,
+                mem_limit_gb=args.mem_limit_gb,
+            )
+            print_scaling(rows)
+            result["scaling"] += rows
 
     if args.part in ("all", "quality"):
         t0 = time.perf_counter()
