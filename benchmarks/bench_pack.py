@@ -7,6 +7,10 @@ Chart sets are generated in code:
     log-uniform random sizes, random rotations and a random uv scale (the packer must undo it).
 ``tiny-300``
     300 small discs and squares plus 3 big charts.
+``brain-<n> atlas``
+    The charts segparam's own pipeline cuts from ``segparam.synthetic.brain_like_surface(n)``
+    (n = 20k, 100k; default config with remeshing off, as in ``bench_atlas.py``), taken just
+    before its pack stage: the real atlases the packer is made for (skip with ``--no-atlas``).
 ``xatlas-<mesh>``
     The charts xatlas itself cuts from a mesh built in code (an icosphere, a torus), taken with
     their xatlas uvs; xatlas's own packing of the same charts at the same resolution and padding
@@ -127,6 +131,33 @@ def _area(uv: np.ndarray, F: np.ndarray) -> float:
 
 
 # ----------------------------------------------------------------------------------------------
+# segparam's own charts
+
+
+def atlas_set(n_faces: int) -> tuple[list, list, np.ndarray]:
+    """The charts of the default pipeline (remeshing off) on a brain-like surface, unpacked."""
+    from segparam.clean import clean
+    from segparam.mesh import face_areas
+    from segparam.pipeline import PipelineConfig
+    from segparam.remesh import remesh
+    from segparam.segment import segment
+    from segparam.split import parameterize_charts
+    from segparam.synthetic import brain_like_surface
+
+    cfg = PipelineConfig().replace(remesh={"mode": "off"})
+    cleaned = clean(*brain_like_surface(n_faces))
+    mesh = remesh(cleaned.V, cleaned.F, config=cfg.remesh)
+    seg = segment(mesh.V, mesh.F, config=cfg.segment, seed=0)
+    charts = parameterize_charts(mesh.V, mesh.F, seg.labels, config=cfg.split, seed=0).charts
+    area = face_areas(mesh.V, mesh.F)
+    return (
+        [c.uv for c in charts],
+        [c.local_F for c in charts],
+        np.array([float(area[c.faces].sum()) for c in charts]),
+    )
+
+
+# ----------------------------------------------------------------------------------------------
 # xatlas charts
 
 
@@ -220,6 +251,7 @@ def main() -> None:
     ap.add_argument("--resolutions", type=int, nargs="+", default=[512, 1024, 2048])
     ap.add_argument("--padding", type=int, default=2)
     ap.add_argument("--no-verify", action="store_true", help="skip the footprint check")
+    ap.add_argument("--no-atlas", action="store_true", help="skip the pipeline's brain charts")
     args = ap.parse_args()
 
     sets = {
@@ -227,6 +259,9 @@ def main() -> None:
         "synthetic-50 seed1": synthetic_set(50, 1),
         "tiny-300": tiny_set(300, 2),
     }
+    if not args.no_atlas:
+        sets["brain-20k atlas"] = atlas_set(20_000)
+        sets["brain-100k atlas"] = atlas_set(100_000)
     meshes = {"xatlas-icosphere": icosphere(3), "xatlas-torus": torus()}
     rows = []
     header = (

@@ -12,6 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from segparam import pack as pack_module
 from segparam.errors import ConfigError, InvalidMeshError
 from segparam.pack import (
     PackConfig,
@@ -206,6 +207,74 @@ def test_rasterize_footprint_analytic_triangle() -> None:
     assert np.array_equal(got, i + j <= 4)
 
 
+def ccw(uv: np.ndarray, F: np.ndarray) -> np.ndarray:
+    a, b, c = uv[F[:, 0]], uv[F[:, 1]], uv[F[:, 2]]
+    signed = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    return np.where((signed < 0)[:, None], F[:, [0, 2, 1]], F)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_outline_fill_rasterizer_matches_triangle_rasterizer(seed: int) -> None:
+    # the packer rasterizes valid charts from their outline plus a winding-number fill; it must
+    # give exactly the texels of the per-triangle kernel, holes and concave outlines included
+    rng = np.random.default_rng(seed)
+    shapes = [
+        disc(int(rng.integers(5, 30)), 3, aspect=rng.uniform(0.2, 1)),
+        grid(7, 5, lambda i, j: (i < 2) | (j < 2)),  # an L
+        grid(6, 6, lambda i, j: (i < 2) | (i > 3) | (j < 2) | (j > 3)),  # a frame: one hole
+    ]
+    for uv, F in shapes:
+        F = ccw(uv, F)
+        B = pack_module._boundary_edges(F)
+        assert B is not None
+        for _ in range(4):
+            P = rotate(uv, rng.uniform(0, 2 * np.pi)) * rng.uniform(0.3, 9)
+            P = P - P.min(axis=0) + rng.uniform(0, 1, 2)
+            if rng.random() < 0.5:  # vertices on texel lines, the delicate cases
+                P = np.round(P * 2) / 2 + 0.0
+            shape = tuple(int(v) for v in np.floor(P.max(axis=0))[::-1] + 2)
+            want = pack_module._raster_kernel(P, F, shape, 1e-4)
+            got = pack_module._fill_kernel(P, B, shape, 1e-4)
+            assert np.array_equal(got, want)
+
+
+def test_boundary_edges_refuses_meshes_the_fill_cannot_handle() -> None:
+    uv, F = grid(2, 1)
+    F = ccw(uv, F)
+    assert len(pack_module._boundary_edges(F)) == 6  # the outline of two unit squares
+    fan = np.array([[0, 1, 2], [0, 1, 3], [1, 0, 4]])  # edge 0-1 in three triangles
+    assert pack_module._boundary_edges(fan) is None
+    twice = np.array([[0, 1, 2], [0, 1, 3]])  # directed edge 0->1 used twice
+    assert pack_module._boundary_edges(twice) is None
+
+
+def test_candidates_are_the_lowest_fitting_positions_per_column() -> None:
+    # at resolution 64 the coarse grid is the texel grid, so the band search must return
+    # exactly the lowest fitting row of each column (brute force below), lowest first
+    rng = np.random.default_rng(0)
+    canvas = pack_module._Canvas(64, 72, 1)
+    assert canvas.block == 1
+    for _ in range(6):
+        blob = rng.random((int(rng.integers(3, 12)), int(rng.integers(3, 12)))) < 0.7
+        fp = pack_module._Footprint(blob | (np.arange(blob.shape[1]) == 0), 1, np.eye(3))
+        pos = canvas.candidates([fp], 1)[0]
+        if pos:
+            canvas.place(fp, *canvas.slide(fp, *pos[0]))
+    fp = pack_module._Footprint(np.tri(9, 14, 4, dtype=bool), 1, np.eye(3))
+    r, c = fp.mask.shape
+    lowest = {}
+    for col in range(64 - c + 1):
+        for row in range(72 - r + 1):
+            if canvas.fits(fp, row, col):
+                lowest[col] = row
+                break
+    got = canvas.candidates([fp], 10**6)[0]
+    assert got, "the canvas still has room"
+    rows = [row for row, _ in got]
+    assert rows == sorted(rows) and rows[0] == min(lowest.values())
+    assert {col: row for row, col in got} == lowest
+
+
 # ----------------------------------------------------------------------------------------------
 # packing: invariants
 
@@ -278,6 +347,48 @@ def test_raster_beats_rect_on_mixed_shapes() -> None:
     assert PackConfig().method == "raster"
     assert raster.utilization > rect.utilization
     assert raster.utilization > 0.62
+
+
+def test_half_turns_let_two_trapezoids_tile_the_square() -> None:
+    # a right trapezoid and its half-turned copy tile a square; quarter turns alone cannot make
+    # them meet along the slanted side (0.43 at 128 texels with 0 and 90 degrees only)
+    trap = np.array([[0, 0], [1, 0], [1, 0.1], [0, 0.9]])
+    F = np.array([[0, 1, 2], [0, 2, 3]])
+    uvs = [rotate(trap, 0.4), rotate(trap, 2.0) + 3]
+    res = pack_charts(uvs, [F, F], [1.0, 1.0], config=PackConfig(resolution=128))
+    assert_valid_layout(res, [F, F])
+    assert res.utilization > 0.8
+    turn = [np.arctan2(A[1, 0], A[0, 0]) for A in res.transforms]
+    relative = np.degrees(turn[1] - turn[0] + 2.0 - 0.4) % 360
+    assert relative == pytest.approx(180.0, abs=1e-6)
+
+
+def test_extra_rotation_angles_keep_the_layout_valid(monkeypatch) -> None:
+    # rotations other than quarter turns (off by default) compose into the same kind of map
+    monkeypatch.setattr(pack_module, "_ANGLES", 3)
+    uvs, faces, areas = mixed_charts(10, seed=9)
+    res = pack_charts(uvs, faces, areas, config=PackConfig(resolution=160))
+    assert_valid_layout(res, faces)
+    ratio = [area_uv(u, F) / a for u, F, a in zip(res.uvs, faces, areas, strict=True)]
+    np.testing.assert_allclose(ratio, res.scale**2, rtol=1e-9)
+    turn = np.degrees([np.arctan2(A[1, 0], A[0, 0]) for A in res.transforms])
+    frames = [np.degrees(min_area_rotation(uv)[1]) for uv in uvs]
+    off_quarter = (turn - frames) % 90
+    assert np.any((off_quarter > 1) & (off_quarter < 89)), "no chart used a 30/60 degree turn"
+
+
+def test_folded_chart_uses_the_triangle_rasterizer() -> None:
+    # a chart whose uv map folds over itself (one triangle flipped) cannot be filled from its
+    # outline; the packer falls back to rasterizing every triangle and stays valid
+    uv, F = grid(4, 4)
+    uv = uv.copy()
+    uv[6] = [2.6, 2.7]  # pull an interior vertex past its neighbours: some triangles flip
+    uvs, faces = [uv, *mixed_charts(5, seed=3)[0]], [F, *mixed_charts(5, seed=3)[1]]
+    areas = [2.0, *mixed_charts(5, seed=3)[2]]
+    charts = pack_module._prepare(uvs, faces, areas)
+    assert charts[0].boundary is None and all(c.boundary is not None for c in charts[1:])
+    res = pack_charts(uvs, faces, areas, config=PackConfig(resolution=128))
+    assert_valid_layout(res, faces)
 
 
 # ----------------------------------------------------------------------------------------------
