@@ -11,6 +11,7 @@ import contextlib
 import gzip
 import logging
 import os
+import re
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -98,6 +99,19 @@ def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     return V, F
 
 
+# An OBJ face corner whose vertex index is 0: OBJ counts from 1 (or from -1 backwards), and
+# trimesh would silently read 0 as a wrong (degenerate) face.
+_OBJ_ZERO_INDEX = re.compile(rb"(?m)^[ \t]*f[ \t][^\n]*?(?<=[ \t])-?0+(?=[/ \t\r\n]|$)")
+
+
+def _check_obj_indices(data: bytes) -> None:
+    """Refuse an OBJ with a face vertex index of 0, naming the line."""
+    match = _OBJ_ZERO_INDEX.search(data)
+    if match:
+        line = data.count(b"\n", 0, match.start()) + 1
+        raise MeshFileError(f"face on line {line} uses vertex index 0; OBJ indices start at 1")
+
+
 def _load_trimesh(data: bytes, suffix: str) -> tuple[np.ndarray, np.ndarray]:
     import io as _io
 
@@ -109,6 +123,8 @@ def _load_trimesh(data: bytes, suffix: str) -> tuple[np.ndarray, np.ndarray]:
         # trimesh decodes non-UTF-8 text with the optional charset_normalizer (ImportError
         # without it); the numbers are ASCII, so undecodable bytes can only be in names.
         data = data.decode("utf-8", errors="replace").encode("utf-8")
+        if suffix == ".obj":
+            _check_obj_indices(data)
     elif suffix == ".stl":
         data = _stl_bytes(data)
     # trimesh logs tracebacks for parts we drop (normals, colours): keep them off stderr.

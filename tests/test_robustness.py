@@ -192,6 +192,10 @@ BAD_FILES = {
     "inf": (lambda d: _obj(d, "inf.obj", "v 0 0 0\nv 1 0 0\nv 0 -inf 0\nf 1 2 3\n"), "inf"),
     "nan ply": (lambda d: _ply(d, "nan.ply", "0 0 0\n1 0 nan\n0 1 0\n3 0 1 2\n"), "NaN"),
     "index obj": (lambda d: _obj(d, "index.obj", TRI + "f 1 2 7\n"), "out of"),
+    "zero index obj": (
+        lambda d: _obj(d, "zero.obj", TRI + "f 0 1 2\n"),
+        "line 4 uses vertex index 0",
+    ),
     "index ply": (lambda d: _ply(d, "index.ply", TRI_PLY + "3 0 1 9\n"), "indices"),
     "negative index ply": (lambda d: _ply(d, "neg.ply", TRI_PLY + "3 0 1 -4\n"), "indices"),
     "index off": (
