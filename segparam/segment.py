@@ -75,6 +75,10 @@ class SegmentConfig:
         Above this many faces, cluster a proxy graph of about this many cells.
     smoothing : int
         Passes of the majority filter that straightens chart borders (0: none).
+    feature_angle : float
+        Degrees. Edges whose faces' normals differ by more than this are sharp; regions that
+        sharp edges enclose completely (the faces of a CAD part) are charted separately, never
+        across their outline. 180 turns this off.
     """
 
     n_charts: int | None = None
@@ -85,6 +89,7 @@ class SegmentConfig:
     convex_weight: float = 0.2
     proxy_faces: int = 20_000
     smoothing: int = 4
+    feature_angle: float = 60.0
 
     def __post_init__(self) -> None:
         if self.n_charts is not None and self.n_charts < 1:
@@ -94,6 +99,8 @@ class SegmentConfig:
                 raise ConfigError(f"{name} is {getattr(self, name)}; it must be positive")
         if self.smoothing < 0:
             raise ConfigError(f"smoothing is {self.smoothing}; it must be >= 0")
+        if not 0 < self.feature_angle <= 180:
+            raise ConfigError(f"feature_angle is {self.feature_angle}; it must be in (0, 180]")
         for name in ("max_charts", "max_chart_faces", "proxy_faces"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"{name} is {getattr(self, name)}; it must be at least 1")
@@ -257,6 +264,32 @@ def _smooth_boundaries(F: np.ndarray, labels: np.ndarray, passes: int) -> np.nda
     return labels
 
 
+def feature_regions(
+    V: np.ndarray, F: np.ndarray, W: sp.csr_matrix, feature_angle: float, min_faces: int
+) -> np.ndarray:
+    """Regions of the face graph that sharp edges enclose completely.
+
+    An edge is sharp when its two faces' normals differ by more than ``feature_angle`` degrees.
+    The regions are the connected components of the face graph without the sharp edges, so
+    sharp edges that do not close a curve (noise on a scan, a crease that fades out) separate
+    nothing; regions smaller than ``min_faces`` (a face or two fenced in by noise) join the
+    neighbour they share most affinity with. On a smooth surface this is the affinity graph's
+    components.
+
+    Returns
+    -------
+    (m,) int64 ndarray
+        Region of every face, ``0 .. r - 1``.
+    """
+    C = W.tocoo()
+    N = face_normals(V, F)
+    smooth = (N[C.row] * N[C.col]).sum(axis=1) >= np.cos(np.radians(feature_angle))
+    G = sp.coo_matrix((np.ones(smooth.sum()), (C.row[smooth], C.col[smooth])), shape=W.shape)
+    _, regions = _cc(G.tocsr(), directed=False)
+    regions = _merge_small(regions.astype(np.int64), W, min_faces)
+    return np.unique(regions, return_inverse=True)[1].ravel().astype(np.int64)
+
+
 def _relabel_components(labels: np.ndarray, W: sp.csr_matrix) -> np.ndarray:
     """Split every label into its edge-connected components (one new label each).
 
@@ -366,7 +399,11 @@ def segment(
     target = min(target, cfg.max_charts, m)
     W = face_affinity(V, F, concave_weight=cfg.concave_weight, convex_weight=cfg.convex_weight)
 
-    n_comp, comp = _cc(W, directed=False)
+    # Feature regions (the faces of a CAD part) are charted apart; a smooth surface is one region
+    # per connected component. Regions of fewer than 16 faces (or 0.2% of a small mesh) are noise
+    # and join a neighbour; the wall of a drilled hole in a CAD mesh has 30 or more.
+    comp = feature_regions(V, F, W, cfg.feature_angle, min(16, max(2, int(0.002 * m))))
+    n_comp = int(comp.max()) + 1
     area = face_areas(V, F)
     comp_area = np.bincount(comp, weights=area, minlength=n_comp)
     # Charts per component, proportional to area (every component gets at least one).
@@ -397,8 +434,12 @@ def segment(
     labels = np.unique(labels, return_inverse=True)[1].ravel().astype(np.int64)
     labels = _smooth_boundaries(F, labels, cfg.smoothing)
     labels = _relabel_components(labels, W)
-    min_faces = max(2, int(0.1 * m / max(target, 1)))
-    labels = _merge_small(labels, W, min_faces)
+    min_faces = max(2, int(0.1 * m / max(target, n_comp)))
+    # Small charts join a neighbour inside their own feature region, never across its outline.
+    C = W.tocoo()
+    inside = comp[C.row] == comp[C.col]
+    W_inside = sp.csr_matrix((C.data[inside], (C.row[inside], C.col[inside])), shape=W.shape)
+    labels = _merge_small(labels, W_inside, min_faces)
     labels = _make_disks(F, labels, W, seed)
     n = int(labels.max()) + 1
     log.info("segment: %d faces -> %d charts (target %d)", m, n, target)

@@ -76,6 +76,59 @@ def test_cuts_follow_sharp_edges():
     assert purity > 0.9
 
 
+def _sharp_pairs(V, F, angle=60.0):
+    from segparam.mesh import face_adjacency, face_normals
+
+    pairs, _ = face_adjacency(F)
+    N = face_normals(V, F)
+    cos = (N[pairs[:, 0]] * N[pairs[:, 1]]).sum(axis=1)
+    return pairs[cos < np.cos(np.radians(angle))]
+
+
+def test_no_chart_crosses_a_closed_feature_outline():
+    # A CAD-like plate: top, bottom, four sides and two hole walls, all fenced in by 90-degree
+    # edges. The sides and hole walls are small next to the top and bottom: the fragment merge
+    # used to fold them into the top, and the solver then failed on the 90-degree creases.
+    V, F = plate_with_holes()
+    seg = segment(V, F)
+    sharp = _sharp_pairs(V, F)
+    assert len(sharp) > 0
+    assert (seg.labels[sharp[:, 0]] != seg.labels[sharp[:, 1]]).all()
+    # Every chart is planar.
+    from segparam.mesh import face_normals
+
+    N = face_normals(V, F)
+    for c in range(seg.n_charts):
+        n = N[seg.labels == c]
+        assert np.abs(n - n[0]).max() < 1e-9
+
+
+def test_feature_regions_ignore_noise_and_open_creases():
+    from segparam.segment import feature_regions
+
+    # A noisy sheet with spikes: sharp edges, but none fence in more than a few faces.
+    V, F = tri_grid(30, 30)
+    rng = np.random.default_rng(1)
+    V[:, 2] = 0.2 / 29 * rng.standard_normal(len(V))
+    V[rng.choice(len(V), 12, replace=False), 2] += 3.0 / 29
+    W = face_affinity(V, F)
+    assert len(_sharp_pairs(V, F)) > 0
+    assert (feature_regions(V, F, W, 60.0, 16) == 0).all()
+    # A crease that ends inside the surface (a half-folded sheet) separates nothing.
+    V, F = tri_grid(20, 20)
+    fold = (V[:, 0] > 0.5) & (V[:, 1] < 0.6)
+    V[fold, 2] = V[fold, 0] - 0.5  # 45 degrees up on part of the right half
+    V[fold, 0] = 0.5 + (V[fold, 0] - 0.5) * 0.1
+    W = face_affinity(V, F)
+    assert len(_sharp_pairs(V, F)) > 0
+    assert (feature_regions(V, F, W, 60.0, 16) == 0).all()
+    # With the feature rule off (180 degrees), the plate is one region too.
+    V, F = plate_with_holes()
+    W = face_affinity(V, F)
+    assert feature_regions(V, F, W, 60.0, 16).max() > 4
+    assert (feature_regions(V, F, W, 180.0, 16) == 0).all()
+
+
 def test_open_disk_stays_one_chart_when_asked():
     V, F = tri_grid(10, 10)
     seg = segment(V, F, config=SegmentConfig(n_charts=1))
@@ -105,6 +158,8 @@ def test_config_errors():
         SegmentConfig(n_charts=0)
     with pytest.raises(ConfigError, match="curvature_per_chart"):
         SegmentConfig(curvature_per_chart=-1)
+    with pytest.raises(ConfigError, match="feature_angle"):
+        SegmentConfig(feature_angle=0)
 
 
 def test_integrated_curvature_ignores_noise_but_keeps_real_curvature():
