@@ -58,6 +58,23 @@ def test_easy_chart_is_not_split():
     assert cs.charts[0].method == "hessian"
 
 
+def test_planar_charts_are_projected_exactly_and_first_pass():
+    from meshes import procrustes_residual, rigid
+
+    V, F = tri_grid(12, 9)
+    V3 = rigid(V, seed=4)  # a plane in general position
+    cs = parameterize_charts(V3, F, np.zeros(len(F), dtype=np.int64))
+    (chart,) = cs.charts
+    assert chart.method == "planar" and cs.first_pass_bijective[0]
+    assert procrustes_residual(chart.uv, V[chart.vertices, :2]) < 1e-12
+    # One vertex a thousandth of an edge out of the plane: the solver runs.
+    a, b, c = V3[F[0]]
+    n = np.cross(b - a, c - a)
+    V3[F[0, 0]] += 1e-3 * np.linalg.norm(b - a) * n / np.linalg.norm(n)
+    cs = parameterize_charts(V3, F, np.zeros(len(F), dtype=np.int64))
+    assert cs.charts[0].method == "hessian"
+
+
 def test_depth_limit_falls_back_to_bijective_projection():
     V, F = tri_grid(20, 20)
     V[:, 2] = np.sin(6 * V[:, 0]) * 0.3
