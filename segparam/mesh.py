@@ -444,14 +444,25 @@ def is_disk(F: np.ndarray, *, holes: bool = True) -> bool:
     """True if the faces form one connected, manifold, consistently oriented genus-0 surface with
     at least one boundary loop (exactly one when ``holes`` is False): a disk, possibly with holes.
     """
-    if len(F) == 0 or not is_edge_manifold(F) or not is_vertex_manifold(F).all():
-        return False  # a non-manifold vertex on a boundary is where a chart touches itself
-    if connected_components(F)[0] != 1:
+    if len(F) == 0:
         return False
-    b = len(boundary_loops(F)) if len(boundary_edges(F)) else 0
+    edge_index = edges(F)  # computed once for every test below
+    E, h2e = edge_index
+    if not is_edge_manifold(F, edge_index=edge_index):
+        return False
+    if not is_vertex_manifold(F, edge_index=edge_index).all():
+        return False  # a non-manifold vertex on a boundary is where a chart touches itself
+    # With every vertex manifold, faces are edge-connected iff their vertices are connected.
+    used = np.unique(F)
+    n = int(used[-1]) + 1
+    _, label = _cc(sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n)))
+    if len(np.unique(label[used])) != 1:
+        return False
+    B = _half_edges(F)[np.bincount(h2e)[h2e] == 1]
+    b = len(boundary_loops(F, boundary=B)) if len(B) else 0
     if b == 0 or (not holes and b != 1):
         return False
-    return euler_characteristic(F) == 2 - b
+    return len(used) - len(E) + len(F) == 2 - b  # Euler characteristic
 
 
 def genus(F: np.ndarray) -> int:

@@ -137,6 +137,32 @@ def test_vertex_manifold_matches_a_per_vertex_walk(seed):
         assert manifold[v] == (_fans_by_walk(F, v) <= 1), v
 
 
+def _is_disk_by_definition(F, holes):
+    if not mesh.is_edge_manifold(F) or not mesh.is_vertex_manifold(F).all():
+        return False
+    if mesh.connected_components(F)[0] != 1:
+        return False
+    b = len(mesh.boundary_loops(F)) if len(mesh.boundary_edges(F)) else 0
+    if b == 0 or (not holes and b != 1):
+        return False
+    return mesh.euler_characteristic(F) == 2 - b
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_is_disk_matches_its_definition(seed):
+    # Random subsets of a grid: disks, disks with holes, several pieces, pinched vertices.
+    rng = np.random.default_rng(seed)
+    _, F = tri_grid(7, 7)
+    for keep in (0.95, 0.8, 0.6):
+        G = F[rng.random(len(F)) < keep]
+        for holes in (True, False):
+            try:
+                expected = _is_disk_by_definition(G, holes)
+            except InvalidMeshError:  # a pinched boundary has no loops to list
+                expected = False
+            assert mesh.is_disk(G, holes=holes) == expected
+
+
 def test_non_manifold_edge():
     F = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
     assert not mesh.is_edge_manifold(F)
