@@ -7,6 +7,12 @@ curvature. The number of charts follows the mesh's integrated absolute Gaussian 
 defect). Large meshes are clustered on a coarse proxy graph (faces grouped into cells by a
 multi-source Dijkstra, affinities summed) and the labels are carried back exactly.
 
+Regions fenced in completely by sharp edges (:func:`feature_regions`: the faces of a CAD part) are
+clustered separately, each into at least one chart, and fragments are merged only inside their
+region, so no chart ever spans a closed feature outline. On the CAD plate of
+``benchmarks/bench_atlas.py`` this gives planar charts only (L2 / Linf stretch 1.000 / 1.00, was
+1.012 / 5.5); on organic meshes the labels are unchanged.
+
 Afterwards every chart is made a connected, genus-0 surface with at least one boundary loop (a disk,
 possibly with holes): fragments are merged into a neighbour and closed or handle-bearing pieces are
 bisected along their Fiedler vector until they are disks.
