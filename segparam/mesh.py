@@ -251,14 +251,16 @@ def edge_face_counts(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return E, np.bincount(h2e, minlength=len(E))
 
 
-def boundary_edges(F: np.ndarray) -> np.ndarray:
+def boundary_edges(F: np.ndarray, *, edge_index: tuple | None = None) -> np.ndarray:
     """Directed boundary half-edges (used by exactly one face), in face winding order.
+
+    ``edge_index`` is ``edges(F)`` when the caller already has it.
 
     Returns
     -------
     (b, 2) int64 ndarray
     """
-    _, h2e = edges(F)
+    _, h2e = edges(F) if edge_index is None else edge_index
     count = np.bincount(h2e)
     return _half_edges(F)[count[h2e] == 1]
 
@@ -309,9 +311,14 @@ def is_vertex_manifold(
     return np.bincount(owner, minlength=n) <= 1
 
 
-def vertex_adjacency(F: np.ndarray, n_vertices: int) -> sp.csr_matrix:
-    """Symmetric vertex adjacency matrix (1 where an edge joins two vertices), sorted CSR."""
-    E, _ = edges(F)
+def vertex_adjacency(
+    F: np.ndarray, n_vertices: int, *, edge_index: tuple | None = None
+) -> sp.csr_matrix:
+    """Symmetric vertex adjacency matrix (1 where an edge joins two vertices), sorted CSR.
+
+    ``edge_index`` is ``edges(F)`` when the caller already has it.
+    """
+    E, _ = edges(F) if edge_index is None else edge_index
     data = np.ones(2 * len(E))
     A = sp.csr_matrix(
         (data, (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])), shape=(n_vertices, n_vertices)
@@ -371,9 +378,12 @@ def connected_components(F: np.ndarray, *, by: str = "edge") -> tuple[int, np.nd
     return int(count), labels.astype(np.int64)
 
 
-def euler_characteristic(F: np.ndarray) -> int:
-    """``V - E + F`` counted over the referenced vertices."""
-    E, _ = edges(F)
+def euler_characteristic(F: np.ndarray, *, edge_index: tuple | None = None) -> int:
+    """``V - E + F`` counted over the referenced vertices.
+
+    ``edge_index`` is ``edges(F)`` when the caller already has it.
+    """
+    E, _ = edges(F) if edge_index is None else edge_index
     return int(len(np.unique(F)) - len(E) + len(F))
 
 
@@ -447,22 +457,20 @@ def is_disk(F: np.ndarray, *, holes: bool = True) -> bool:
     if len(F) == 0:
         return False
     edge_index = edges(F)  # computed once for every test below
-    E, h2e = edge_index
     if not is_edge_manifold(F, edge_index=edge_index):
         return False
     if not is_vertex_manifold(F, edge_index=edge_index).all():
         return False  # a non-manifold vertex on a boundary is where a chart touches itself
     # With every vertex manifold, faces are edge-connected iff their vertices are connected.
     used = np.unique(F)
-    n = int(used[-1]) + 1
-    _, label = _cc(sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n)))
-    if len(np.unique(label[used])) != 1:
+    A = vertex_adjacency(F, int(used[-1]) + 1, edge_index=edge_index)
+    if len(np.unique(_cc(A, directed=False)[1][used])) != 1:
         return False
-    B = _half_edges(F)[np.bincount(h2e)[h2e] == 1]
+    B = boundary_edges(F, edge_index=edge_index)
     b = len(boundary_loops(F, boundary=B)) if len(B) else 0
     if b == 0 or (not holes and b != 1):
         return False
-    return len(used) - len(E) + len(F) == 2 - b  # Euler characteristic
+    return euler_characteristic(F, edge_index=edge_index) == 2 - b
 
 
 def genus(F: np.ndarray) -> int:

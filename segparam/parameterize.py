@@ -39,6 +39,7 @@ from scipy.spatial import cKDTree
 from .errors import InvalidMeshError
 from .linalg import smallest_eigenpairs
 from .mesh import (
+    boundary_edges,
     check_mesh,
     edges,
     face_areas,
@@ -154,9 +155,8 @@ def check_chart(V, F) -> tuple[np.ndarray, np.ndarray]:
             f"chart has {int((~used).sum())} unreferenced vertices; every vertex needs a face"
         )
     edge_index = edges(F)
-    E = edge_index[0]
-    A = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
     # Vertex-connected and vertex-manifold (checked below) implies connected through edges.
+    A = vertex_adjacency(F, n, edge_index=edge_index)
     count = graph_components(A, directed=False, return_labels=False)
     if count != 1:
         raise InvalidMeshError(f"chart has {count} connected components; it must be one piece")
@@ -165,7 +165,7 @@ def check_chart(V, F) -> tuple[np.ndarray, np.ndarray]:
     bad = ~is_vertex_manifold(F, n, edge_index=edge_index)
     if bad.any():
         raise InvalidMeshError(f"chart has {int(bad.sum())} non-manifold vertices")
-    if np.bincount(edge_index[1]).min() > 1:
+    if len(boundary_edges(F, edge_index=edge_index)) == 0:
         raise InvalidMeshError("chart is closed (no boundary); cut it before parameterizing")
     return V, F
 
@@ -642,7 +642,9 @@ def arap_refine(
     return _arap(V, F, uv, iterations=iterations, tol=tol, min_decrease=min_decrease)[0]
 
 
-def _arap(V, F, uv, *, iterations, tol, min_decrease) -> tuple[np.ndarray, int]:
+def _arap(
+    V, F, uv, *, iterations=10, tol=ARAP_TOL, min_decrease=ARAP_MIN_DECREASE
+) -> tuple[np.ndarray, int]:
     """:func:`arap_refine`, also returning the number of global steps taken."""
     import scipy.sparse.linalg as spla
 
@@ -744,14 +746,7 @@ class HessianSolver:
         quality = None
         steps = 0
         if refine == "arap":
-            uv_r, steps = _arap(
-                self._Vn,
-                self.F,
-                uv,
-                iterations=refine_iterations,
-                tol=ARAP_TOL,
-                min_decrease=ARAP_MIN_DECREASE,
-            )
+            uv_r, steps = _arap(self._Vn, self.F, uv, iterations=refine_iterations)
         if steps:
             q_r = chart_quality(self._Vn, self.F, uv_r)
             if q_r.bijective:

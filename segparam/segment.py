@@ -296,15 +296,19 @@ def feature_regions(
     return np.unique(regions, return_inverse=True)[1].ravel().astype(np.int64)
 
 
+def _within(W: sp.csr_matrix, labels: np.ndarray) -> sp.csr_matrix:
+    """``W`` without the entries that join two different labels."""
+    C = W.tocoo()
+    same = labels[C.row] == labels[C.col]
+    return sp.csr_matrix((C.data[same], (C.row[same], C.col[same])), shape=W.shape)
+
+
 def _relabel_components(labels: np.ndarray, W: sp.csr_matrix) -> np.ndarray:
     """Split every label into its edge-connected components (one new label each).
 
     ``W``'s pattern is the face adjacency (every affinity is positive).
     """
-    C = W.tocoo()
-    same = labels[C.row] == labels[C.col]
-    G = sp.coo_matrix((np.ones(same.sum()), (C.row[same], C.col[same])), shape=W.shape)
-    _, comp = _cc(G.tocsr(), directed=False)
+    _, comp = _cc(_within(W, labels), directed=False)
     return np.unique(comp, return_inverse=True)[1].ravel().astype(np.int64)
 
 
@@ -442,10 +446,7 @@ def segment(
     labels = _relabel_components(labels, W)
     min_faces = max(2, int(0.1 * m / max(target, n_comp)))
     # Small charts join a neighbour inside their own feature region, never across its outline.
-    C = W.tocoo()
-    inside = comp[C.row] == comp[C.col]
-    W_inside = sp.csr_matrix((C.data[inside], (C.row[inside], C.col[inside])), shape=W.shape)
-    labels = _merge_small(labels, W_inside, min_faces)
+    labels = _merge_small(labels, _within(W, comp), min_faces)
     labels = _make_disks(F, labels, W, seed)
     n = int(labels.max()) + 1
     log.info("segment: %d faces -> %d charts (target %d)", m, n, target)
