@@ -37,7 +37,7 @@ from scipy.sparse.csgraph import connected_components as graph_components
 from scipy.spatial import cKDTree
 
 from .errors import InvalidMeshError
-from .linalg import smallest_eigenpairs
+from .linalg import smallest_eigenpairs, spd_solver
 from .mesh import (
     boundary_edges,
     check_mesh,
@@ -646,13 +646,11 @@ def _arap(
     V, F, uv, *, iterations=10, tol=ARAP_TOL, min_decrease=ARAP_MIN_DECREASE
 ) -> tuple[np.ndarray, int]:
     """:func:`arap_refine`, also returning the number of global steps taken."""
-    import scipy.sparse.linalg as spla
-
     D = _gradient_operator(V, F)
     w = np.repeat(face_areas(V, F), 2)
     w_total = w.sum() / 2
     free = np.arange(1, len(V))  # vertex 0 is pinned: the energy ignores translations
-    lu = None
+    solve = None
     uv = uv - uv[0]
     previous = np.inf
     for step in range(iterations + 1):
@@ -673,17 +671,12 @@ def _arap(
         ):
             return uv, step
         previous = energy
-        if lu is None:
+        if solve is None:
             L = (D.T @ sp.diags(w) @ D).tocsc()
-            lu = spla.splu(
-                L[free][:, free].tocsc(),
-                permc_spec="MMD_AT_PLUS_A",
-                diag_pivot_thresh=0.0,
-                options={"SymmetricMode": True},
-            )
+            solve = spd_solver(L[free][:, free])
         rhs = D.T @ (w[:, None] * Rt.reshape(-1, 2))
         uv = np.zeros_like(uv)
-        uv[free] = lu.solve(rhs[free])
+        uv[free] = solve(rhs[free])
     raise AssertionError("unreachable")  # pragma: no cover
 
 

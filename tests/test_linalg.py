@@ -1,11 +1,10 @@
-"""The eigen-solver helper: sparse paths (minimum degree, nested dissection, start guess) agree
-with a dense solve."""
+"""The linear-algebra helpers: both factorization paths (CHOLMOD, SuperLU) solve, and the sparse
+eigen-solver agrees with a dense solve on each, with or without a start guess."""
 
 import numpy as np
 import pytest
 import scipy.linalg
 import scipy.sparse as sp
-import scipy.sparse.linalg
 from meshes import cylinder_patch
 
 from segparam import linalg
@@ -28,27 +27,44 @@ def _same_span(X, Y):
     return np.linalg.svd(Qx.T @ Qy, compute_uv=False).min()
 
 
-def test_fill_reducing_order_is_a_permutation_with_less_fill(K):
-    # Vertices in random order (as a remeshed chart has them): nested dissection must beat it.
+def _no_cholmod(A):
+    raise ImportError("cvxopt hidden by the test")
+
+
+def _no_superlu(*args, **kwargs):
+    raise AssertionError("SuperLU used where CHOLMOD should be")
+
+
+@pytest.fixture(params=["cholmod", "superlu"])
+def path(request, monkeypatch):
+    """Run a test once on each factorization path of ``spd_solver``, proving which one ran."""
+    if request.param == "cholmod":
+        monkeypatch.setattr(linalg.spla, "splu", _no_superlu)
+    else:
+        monkeypatch.setattr(linalg, "_cholmod_solver", _no_cholmod)
+    return request.param
+
+
+@pytest.mark.parametrize("shape", [(), (4,)], ids=["vector", "block"])
+def test_spd_solver_solves(K, path, shape):
     n = K.shape[0]
-    shuffle = np.random.default_rng(0).permutation(n)
-    A = (K + 1e-6 * sp.identity(n)).tocsc()[shuffle][:, shuffle].tocsc()
-    perm = linalg.fill_reducing_order(A)
-    assert np.array_equal(np.sort(perm), np.arange(n))
-
-    def fill(M):
-        lu = scipy.sparse.linalg.splu(
-            M, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
-        )
-        return lu.L.nnz + lu.U.nnz
-
-    assert fill(A[perm][:, perm].tocsc()) < 0.5 * fill(A)
+    A = (K + 1e-3 * abs(K).sum(axis=0).max() * sp.identity(n)).tocsc()
+    B = np.random.default_rng(1).standard_normal((n, *shape))
+    X = linalg.spd_solver(A)(B)
+    assert X.shape == B.shape
+    np.testing.assert_allclose(A @ X, B, atol=1e-9 * np.abs(B).max())
 
 
-@pytest.mark.parametrize("nd_rows", [10**9, 0], ids=["minimum-degree", "nested-dissection"])
+def test_spd_solver_falls_back_on_an_indefinite_matrix():
+    # Symmetric and non-singular but indefinite: Cholesky stops, the LU path must answer.
+    A = sp.diags([2.0, -3.0, 4.0, 5.0]) + sp.diags([np.ones(3), np.ones(3)], [-1, 1])
+    b = np.arange(1.0, 5.0)
+    x = linalg.spd_solver(A)(b)
+    np.testing.assert_allclose(A @ x, b, atol=1e-12)
+
+
 @pytest.mark.parametrize("with_guess", [False, True])
-def test_sparse_paths_match_the_dense_solve(K, monkeypatch, nd_rows, with_guess):
-    monkeypatch.setattr(linalg, "NESTED_DISSECTION_MIN_ROWS", nd_rows)
+def test_sparse_paths_match_the_dense_solve(K, path, with_guess):
     n = K.shape[0]
     guess = None
     if with_guess:
