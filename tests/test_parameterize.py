@@ -15,10 +15,14 @@ from segparam.errors import InvalidMeshError
 from segparam.mesh import edges, face_areas
 from segparam.parameterize import (
     HessianSolver,
+    _design,
+    _groups,
     hessian_matrix,
+    ill_conditioned,
     local_hessians,
     neighbourhoods,
     parameterize_chart,
+    tangent_frames,
     vertex_weights,
 )
 from segparam.quality import signed_areas
@@ -163,6 +167,30 @@ def test_neighbourhoods_are_one_rings_with_minimal_extension():
     for i in range(len(V)):
         N = idx[ptr[i] : ptr[i + 1]]
         assert len(set(N.tolist())) == len(N)
+
+
+@pytest.mark.parametrize("min_rcond", [0.03, 0.1, 0.16])
+def test_ill_conditioned_matches_the_eigenvalue_definition(min_rcond):
+    # A jittered cap: its boundary fits are poor, its interior ones spread around 0.1-0.2, so
+    # every threshold here splits the vertices and the Cholesky screen must not change a verdict.
+    V, F = spherical_cap()
+    V = V + 0.2 * np.random.default_rng(0).normal(size=V.shape) * np.sqrt(face_areas(V, F).mean())
+    ptr, idx = neighbourhoods(V, F)
+    b1, b2 = tangent_frames(V, F, ptr, idx)
+    rcond = np.empty(len(V))
+    for rows, N in _groups(ptr, idx):
+        u, v, _ = _design(V, N, b1[rows], b2[rows])
+        P = np.stack([u * u, u * v, v * v, u, v, np.ones_like(u)], axis=2)
+        sv = np.linalg.svd(P, compute_uv=False)
+        rcond[rows] = sv[:, -1] / sv[:, 0]
+    expected = rcond < min_rcond
+    assert 0 < expected.sum() < len(V), expected.sum()
+    assert np.array_equal(ill_conditioned(V, ptr, idx, b1, b2, min_rcond), expected)
+    subset = np.arange(0, len(V), 3)
+    only = ill_conditioned(V, ptr, idx, b1, b2, min_rcond, subset)
+    assert (
+        np.array_equal(only[subset], expected[subset]) and not only[np.arange(1, len(V), 3)].any()
+    )
 
 
 def test_invariant_under_rigid_motion_and_uniform_scale():
