@@ -569,7 +569,9 @@ def hessian_eigenmap(
     return U, values
 
 
-def isometric_fit(V: np.ndarray, F: np.ndarray, Y: np.ndarray) -> np.ndarray:
+def isometric_fit(
+    V: np.ndarray, F: np.ndarray, Y: np.ndarray, inv_frames: np.ndarray | None = None
+) -> np.ndarray:
     """The linear map ``uv = Y A`` that makes the chart closest to isometric.
 
     With ``G_t`` the Jacobian of triangle ``t`` into ``Y``, the map's metric is
@@ -580,7 +582,7 @@ def isometric_fit(V: np.ndarray, F: np.ndarray, Y: np.ndarray) -> np.ndarray:
     -------
     uv : (n, 2) float64 ndarray
     """
-    G = jacobians(V, F, Y)
+    G = jacobians(V, F, Y, inv_frames)
     r1, r2 = G[:, 0, :], G[:, 1, :]  # rows of G_t
 
     def sym(p, q):  # entries (xx, yy, sqrt2 xy) of p q^T + q p^T, / 2
@@ -617,11 +619,14 @@ def orient(uv: np.ndarray, F: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 
 
-def _gradient_operator(V: np.ndarray, F: np.ndarray) -> sp.csr_matrix:
+def _gradient_operator(
+    V: np.ndarray, F: np.ndarray, inv_frames: np.ndarray | None = None
+) -> sp.csr_matrix:
     """``D`` (2m x n): row ``2t + k`` gives column ``k`` of triangle ``t``'s Jacobian from the
     per-vertex values of one uv coordinate (see :func:`segparam.quality.jacobians`)."""
     m = len(F)
-    Pinv = inverse_frames(triangle_frames(V, F))  # J = [q1 q2] @ Pinv, q_j = uv[F_j] - uv[F_0]
+    # J = [q1 q2] @ Pinv, q_j = uv[F_j] - uv[F_0]
+    Pinv = inverse_frames(triangle_frames(V, F)) if inv_frames is None else inv_frames
     rows = np.repeat(2 * np.arange(m)[:, None] + np.arange(2), 3, axis=1)  # (m, 2) -> (m, 6)
     rows = rows.reshape(m, 2, 3)
     cols = np.broadcast_to(F[:, None, :], (m, 2, 3))
@@ -667,10 +672,10 @@ def arap_refine(
 
 
 def _arap(
-    V, F, uv, *, iterations=10, tol=ARAP_TOL, min_decrease=ARAP_MIN_DECREASE
+    V, F, uv, *, iterations=10, tol=ARAP_TOL, min_decrease=ARAP_MIN_DECREASE, inv_frames=None
 ) -> tuple[np.ndarray, int]:
     """:func:`arap_refine`, also returning the number of global steps taken."""
-    D = _gradient_operator(V, F)
+    D = _gradient_operator(V, F, inv_frames)
     w = np.repeat(face_areas(V, F), 2)
     w_total = w.sum() / 2
     free = np.arange(1, len(V))  # vertex 0 is pinned: the energy ignores translations
@@ -757,23 +762,26 @@ class HessianSolver:
         guess = np.column_stack([np.ones(len(self._Vn)), self._Vn])
         Y, values = hessian_eigenmap(self.K, seed=seed, guess=guess)
         t1 = time.perf_counter()
-        uv = orient(isometric_fit(self._Vn, self.F, Y), self.F)
+        frames = inverse_frames(triangle_frames(self._Vn, self.F))  # shared by every measure
+        uv = orient(isometric_fit(self._Vn, self.F, Y, frames), self.F)
         t2 = time.perf_counter()
         refined = False
         quality = None
         steps = 0
         if refine == "arap":
-            uv_r, steps = _arap(self._Vn, self.F, uv, iterations=refine_iterations)
+            uv_r, steps = _arap(
+                self._Vn, self.F, uv, iterations=refine_iterations, inv_frames=frames
+            )
         if steps:
-            q_r = chart_quality(self._Vn, self.F, uv_r)
+            q_r = chart_quality(self._Vn, self.F, uv_r, frames)
             if q_r.bijective:
                 uv, quality, refined = uv_r, q_r, True
             else:
-                quality = chart_quality(self._Vn, self.F, uv)
+                quality = chart_quality(self._Vn, self.F, uv, frames)
                 if not quality.bijective and q_r.n_flipped < quality.n_flipped:
                     uv, quality, refined = uv_r, q_r, True
         if quality is None:
-            quality = chart_quality(self._Vn, self.F, uv)
+            quality = chart_quality(self._Vn, self.F, uv, frames)
         t3 = time.perf_counter()
         return ChartMap(
             uv=(uv - uv.min(axis=0)) * self.scale,

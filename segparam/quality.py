@@ -120,8 +120,13 @@ def triangle_frames(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     return P
 
 
-def jacobians(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> np.ndarray:
+def jacobians(
+    V: np.ndarray, F: np.ndarray, uv: np.ndarray, inv_frames: np.ndarray | None = None
+) -> np.ndarray:
     """Jacobian of the affine map from each 3-D triangle (in its own orthonormal frame) to uv.
+
+    `inv_frames`, ``inverse_frames(triangle_frames(V, F))``, may be passed when the same
+    triangles are measured several times (it is most of the cost).
 
     Returns
     -------
@@ -129,7 +134,9 @@ def jacobians(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> np.ndarray:
         ``J[f] @ p`` maps a vector ``p`` of triangle ``f``'s frame to uv; ``det J < 0`` on flips.
     """
     Q = np.stack([uv[F[:, 1]] - uv[F[:, 0]], uv[F[:, 2]] - uv[F[:, 0]]], axis=2)
-    return Q @ inverse_frames(triangle_frames(V, F))
+    if inv_frames is None:
+        inv_frames = inverse_frames(triangle_frames(V, F))
+    return Q @ inv_frames
 
 
 def inverse_frames(P: np.ndarray) -> np.ndarray:
@@ -211,7 +218,9 @@ def _loop_area(uv: np.ndarray, loop: np.ndarray) -> float:
     return 0.5 * float((p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]).sum())
 
 
-def chart_quality(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> ChartQuality:
+def chart_quality(
+    V: np.ndarray, F: np.ndarray, uv: np.ndarray, inv_frames: np.ndarray | None = None
+) -> ChartQuality:
     """Bijectivity checks and distortion of the chart map ``(V, F) -> uv``.
 
     Parameters
@@ -220,6 +229,8 @@ def chart_quality(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> ChartQuality:
     F : (m, 3) int ndarray
         A connected, manifold chart with at least one boundary loop.
     uv : (n, 2) float ndarray
+    inv_frames : (m, 2, 2) float ndarray, optional
+        ``inverse_frames(triangle_frames(V, F))``, if already computed (see :func:`jacobians`).
 
     Returns
     -------
@@ -254,7 +265,7 @@ def chart_quality(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> ChartQuality:
         not flipped.any() and not degenerate.any() and n_branch == 0 and n_cross == 0 and oriented
     )
 
-    d = distortion(V, F, uv)
+    d = distortion(V, F, uv, inv_frames)
     return ChartQuality(
         n_flipped=int(flipped.sum()),
         n_degenerate=int(degenerate.sum()),
@@ -266,11 +277,13 @@ def chart_quality(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> ChartQuality:
     )
 
 
-def distortion(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> dict[str, float]:
+def distortion(
+    V: np.ndarray, F: np.ndarray, uv: np.ndarray, inv_frames: np.ndarray | None = None
+) -> dict[str, float]:
     """Area-weighted distortion of ``(V, F) -> uv`` after scaling uv area to 3-D area.
 
     Works on any set of triangles (one chart or a whole atlas with seams): each face is measured
-    on its own.
+    on its own. `inv_frames` as in :func:`jacobians`.
 
     Returns
     -------
@@ -283,7 +296,7 @@ def distortion(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> dict[str, float]
     total3 = float(area3.sum())
     total_uv = float(np.abs(signed_areas(uv, F)).sum())
     scale = np.sqrt(total3 / total_uv) if total_uv > 0 else 1.0
-    s1, s2 = singular_values(jacobians(V, F, uv * scale))
+    s1, s2 = singular_values(jacobians(V, F, uv * scale, inv_frames))
     w = area3 / total3
     with np.errstate(divide="ignore", invalid="ignore"):
         inv1, inv2 = 1.0 / s1, 1.0 / s2  # singular values of the inverse map uv -> surface
