@@ -24,6 +24,13 @@ Part 2, quality on cortex-like parcels (the paper's comparison)
     vertices), a pipeline runs them in parallel, and multithreaded dense ``eigh`` on such sizes
     only adds overhead, up to 5-8x on a machine whose cores are busy.
 
+Part 3, factorization (``--part factor``, not in ``all``)
+    The factorization behind the eigen-solver, alone, on the ``K - sigma I`` of the scaling
+    surfaces and of one folded brain-like parcel of about the same size
+    (``brain_like_parcels(1, ..., folding=2.0)``): CHOLMOD's supernodal Cholesky through cvxopt
+    (what :func:`segparam.linalg.spd_solver` uses) against its SuperLU fallback (minimum degree on
+    ``A + A^T``, symmetric mode); best of ``--repeats``, and SuperLU's fill (non-zeros in L + U).
+
 Usage::
 
     python benchmarks/bench_solver.py [--sizes 1000,10000,100000,300000] [--parcels 89]
@@ -414,6 +421,67 @@ def machine_info() -> dict:
     }
 
 
+# ---------------------------------------------------------------------------------------------
+# Part 3: the factorization alone
+
+
+def _shifted_hessian(surface: str, n: int):
+    import scipy.sparse as sp
+
+    from segparam.parameterize import hessian_matrix
+
+    if surface == "brain":
+        from segparam.synthetic import brain_like_parcels
+
+        V, F = brain_like_parcels(
+            1, mean_faces=2 * n, min_faces=int(1.8 * n), max_faces=int(2.2 * n), folding=2.0
+        )[0]
+    else:
+        V, F = wavy_sheet(n, surface)
+    K = hessian_matrix(V, F).tocsc()
+    sigma = -1e-3 * float(np.abs(K.diagonal()).mean()) / K.shape[0] ** 2  # as in linalg
+    return (K - sigma * sp.identity(K.shape[0], format="csc")).tocsc()
+
+
+def factor_table(sizes: list[int], surfaces: list[str], repeats: int) -> list[dict]:
+    import scipy.sparse.linalg as spla
+
+    from segparam import linalg
+
+    rows = []
+    for surface in surfaces:
+        for n in sizes:
+            A = _shifted_hessian(surface, n)
+            times = {"cholmod": [], "superlu": []}
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                linalg._cholmod_solver(A)
+                times["cholmod"].append(time.perf_counter() - t0)
+                t0 = time.perf_counter()
+                lu = spla.splu(
+                    A,
+                    permc_spec="MMD_AT_PLUS_A",
+                    diag_pivot_thresh=0.0,
+                    options={"SymmetricMode": True},
+                )
+                times["superlu"].append(time.perf_counter() - t0)
+            row = {
+                "surface": surface,
+                "rows": A.shape[0],
+                "nnz": int(A.nnz),
+                "cholmod_s": min(times["cholmod"]),
+                "superlu_s": min(times["superlu"]),
+                "superlu_fill": int(lu.L.nnz + lu.U.nnz),
+            }
+            print(
+                f"  {surface:6s} {row['rows']:>8,d} rows  CHOLMOD {row['cholmod_s']:6.2f} s  "
+                f"SuperLU {row['superlu_s']:6.2f} s  ({row['superlu_fill']:,d} in L+U)",
+                flush=True,
+            )
+            rows.append(row)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--sizes", default=None, help=f"vertex counts (default {DEFAULT_SIZES})")
@@ -425,7 +493,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--quality-threads", type=int, default=1, help="BLAS threads in part 2 (0: no limit)"
     )
-    p.add_argument("--part", choices=("all", "scaling", "quality"), default="all")
+    p.add_argument("--part", choices=("all", "scaling", "quality", "factor"), default="all")
     p.add_argument(
         "--surfaces", default="sheet,bump", help="scaling surfaces: sheet (developable), bump"
     )
@@ -461,6 +529,11 @@ def main(argv: list[str] | None = None) -> int:
             )
             print_scaling(rows)
             result["scaling"] += rows
+
+    if args.part == "factor":
+        print(f"\nFactorization of K - sigma I, best of {args.repeats}")
+        surfaces = args.surfaces.split(",") + ["brain"]
+        result["factor"] = factor_table(sizes, surfaces, args.repeats)
 
     if args.part in ("all", "quality"):
         t0 = time.perf_counter()

@@ -23,10 +23,11 @@ def spd_solver(A: sp.spmatrix) -> Callable[[np.ndarray], np.ndarray]:
     """Factorize a sparse symmetric positive definite matrix once; return ``B -> A^-1 B``.
 
     The factorization is CHOLMOD's supernodal Cholesky (through cvxopt, which ships it with
-    OpenBLAS; AMD ordering). On the Hessian matrices of surface charts it is 2-3x faster than
-    scipy's SuperLU even when SuperLU is given a METIS nested-dissection order: at 100k vertices
-    1.1-1.7 s against 3.3-4.0 s (METIS 1.1-1.5 s + LU 2.3-2.5 s), at 300k 5.6 s against 13.7 s
-    (a Cholesky factor is half an LU's size, and its supernodes run as dense BLAS-3 blocks).
+    OpenBLAS; AMD ordering). On the Hessian matrices of surface charts it is 2-5x faster than
+    scipy's SuperLU: at 100k vertices 1.2-1.5 s against 2.9-4.1 s, at 300k 5.4-7.8 s against
+    20-26 s (``python benchmarks/bench_solver.py --part factor``; a Cholesky factor is half an
+    LU's size, and its supernodes run as dense BLAS-3 blocks); METIS nested dissection in front of
+    it costs more than it saves.
     When cvxopt is missing, or ``A`` is not numerically positive definite (CHOLMOD stops at a
     non-positive pivot), it falls back to SuperLU's LU with a minimum-degree order on
     ``A + A^T``, which needs only a non-singular ``A``.
