@@ -13,6 +13,14 @@ region, so no chart ever spans a closed feature outline. On the CAD plate of
 ``benchmarks/bench_atlas.py`` this gives planar charts only (L2 / Linf stretch 1.000 / 1.00, was
 1.012 / 5.5); on organic meshes the labels are unchanged.
 
+The clustered charts' borders are then cleaned up on the face graph, inside the feature regions
+only: a majority filter removes saw-teeth, and threshold dynamics (diffuse every chart's indicator
+near the borders, let each face join the chart that diffuses most into it) round the charts, so
+that flattened they fill more of their convex hulls and pack tighter. On eight 100k-face brain-like
+surfaces (default pipeline, 1024 texels, padding 2) the two took the mean packing utilization from
+0.662 to 0.684, the mean convex-hull fill of the charts from 0.860 to 0.880 and the seam length
+by 7%, at 0.27 s (1.5 s at 1M faces).
+
 Afterwards every chart is made a connected, genus-0 surface with at least one boundary loop (a disk,
 possibly with holes): fragments are merged into a neighbour and closed or handle-bearing pieces are
 bisected along their Fiedler vector until they are disks.
@@ -27,6 +35,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components as _cc
 from scipy.sparse.csgraph import dijkstra
+from scipy.special import ive
 
 from .errors import ConfigError
 from .linalg import smallest_eigenpairs
@@ -37,7 +46,6 @@ from .mesh import (
     edges,
     face_adjacency,
     face_areas,
-    face_neighbors,
     face_normals,
     is_disk,
     unit_frame,
@@ -81,6 +89,12 @@ class SegmentConfig:
         Above this many faces, cluster a proxy graph of about this many cells.
     smoothing : int
         Passes of the majority filter that straightens chart borders (0: none).
+    rounding : float
+        Diffusion time, in random-walk steps on the face graph, of the threshold dynamics that
+        round the charts after clustering (0: none). Borders are smoothed over about
+        ``sqrt(rounding)`` rings of faces: lobes and spurs recede, so the flattened charts fill
+        more of their convex hulls and pack tighter. The scale is in faces, so on finer meshes
+        it rounds relatively less (and costs no more per face).
     feature_angle : float
         Degrees. Edges whose faces' normals differ by more than this are sharp; regions that
         sharp edges enclose completely (the faces of a CAD part) are charted separately, never
@@ -96,6 +110,7 @@ class SegmentConfig:
     proxy_faces: int = 20_000
     smoothing: int = 4
     feature_angle: float = 60.0
+    rounding: float = 128.0
 
     def __post_init__(self) -> None:
         if self.n_charts is not None and self.n_charts < 1:
@@ -105,6 +120,8 @@ class SegmentConfig:
                 raise ConfigError(f"{name} is {getattr(self, name)}; it must be positive")
         if self.smoothing < 0:
             raise ConfigError(f"smoothing is {self.smoothing}; it must be >= 0")
+        if not (np.isfinite(self.rounding) and self.rounding >= 0):
+            raise ConfigError(f"rounding is {self.rounding}; it must be finite and >= 0")
         if not 0 < self.feature_angle <= 180:
             raise ConfigError(f"feature_angle is {self.feature_angle}; it must be in (0, 180]")
         for name in ("max_charts", "max_chart_faces", "proxy_faces"):
@@ -252,18 +269,217 @@ def _cluster(W: sp.csr_matrix, k: int, seed: int) -> np.ndarray:
     return model.fit_predict(W).astype(np.int64)
 
 
-def _smooth_boundaries(F: np.ndarray, labels: np.ndarray, passes: int) -> np.ndarray:
+def _smooth_boundaries(nbr: np.ndarray, labels: np.ndarray, passes: int) -> np.ndarray:
     """Majority filter on chart labels: a face whose edge neighbours mostly belong to one other
     chart joins it. Clustering on faces leaves saw-tooth chart borders; straighter borders mean
-    shorter seams and charts that pack tighter."""
-    nb = face_neighbors(F)  # -1 where there is no neighbour
+    shorter seams and charts that pack tighter.
+
+    Parameters
+    ----------
+    nbr : (m, w) int64 ndarray
+        Neighbours of every face, -1 in unused slots (see :func:`_neighbor_table`).
+    labels : (m,) int64 ndarray
+    passes : int
+        Most passes; stops early at a fixed point.
+
+    Returns
+    -------
+    (m,) int64 ndarray
+    """
+    L = np.where(nbr >= 0, labels[np.maximum(nbr, 0)], -1)
+    below = (nbr >= 0) & (nbr < np.arange(len(labels))[:, None])
     for _ in range(passes):
-        L = np.where(nb >= 0, labels[np.maximum(nb, 0)], -1)
         own = labels
         new = labels.copy()
         for a, b in ((0, 1), (0, 2), (1, 2)):
+            if b >= nbr.shape[1]:
+                continue
             agree = (L[:, a] == L[:, b]) & (L[:, a] >= 0) & (L[:, a] != own)
             new = np.where(agree & (new == own), L[:, a], new)
+        # Two neighbours that would trade labels (each one an ear of the other's chart) would
+        # swap back and forth forever under simultaneous updates: only the lower index moves.
+        # Without this, 4 passes left 80% of the ears of the 100k brain in place.
+        moved = new != own
+        swap = (below & (L == new[:, None]) & (new[np.maximum(nbr, 0)] == own[:, None])).any(axis=1)
+        swap &= moved
+        new[swap] = own[swap]
+        if np.array_equal(new, labels):
+            break
+        labels = new
+        L = np.where(nbr >= 0, labels[np.maximum(nbr, 0)], -1)
+    return labels
+
+
+def _neighbor_table(W: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
+    """Padded neighbour table of a graph and its random-walk transition probabilities.
+
+    Returns
+    -------
+    nbr : (m, w) int64 ndarray
+        Neighbours of every node, -1 in unused slots (``w``: the largest degree).
+    P : (m, w) float ndarray
+        ``W[i, nbr[i, s]] / sum_j W[i, j]``, 0 in unused slots.
+    """
+    m = W.shape[0]
+    deg = np.diff(W.indptr)
+    width = int(deg.max()) if m else 0
+    if m and (deg == width).all():  # a closed manifold: every face has three neighbours
+        nbr = W.indices.astype(np.int64).reshape(m, width)
+        wgt = W.data.reshape(m, width)
+    else:
+        slot = np.arange(len(W.indices)) - np.repeat(W.indptr[:-1], deg)
+        rows = np.repeat(np.arange(m), deg)
+        nbr = np.full((m, width), -1, dtype=np.int64)
+        wgt = np.zeros((m, width))
+        nbr[rows, slot] = W.indices
+        wgt[rows, slot] = W.data
+    d = wgt.sum(axis=1, keepdims=True)
+    return nbr, wgt / np.where(d > 0, d, 1.0)
+
+
+def _unique_sorted(x: np.ndarray) -> np.ndarray:
+    """``np.unique`` by sorting (numpy 2's hash-based unique is 50x slower on these keys)."""
+    x = np.sort(x)
+    return x[np.r_[True, x[1:] != x[:-1]]] if len(x) else x
+
+
+def _band_pairs(nbr: np.ndarray, labels: np.ndarray, n_labels: int, rings: int) -> np.ndarray:
+    """Sorted keys ``f * n_labels + k`` of the faces ``f`` within ``rings`` rings of the border
+    of chart ``k`` (on either side; ring 0 is the faces that touch it).
+
+    A breadth-first search per chart, all charts at once: on an undirected graph ring ``r + 1``
+    is the neighbours of ring ``r`` that are in neither ring ``r`` nor ring ``r - 1``.
+    """
+    nb_lab = np.where(nbr >= 0, labels[np.maximum(nbr, 0)], -1)
+    cross = (nb_lab >= 0) & (nb_lab != labels[:, None])
+    f0 = np.flatnonzero(cross.any(axis=1))
+    fc, sc = np.nonzero(cross)
+    ring = _unique_sorted(np.r_[fc * n_labels + nb_lab[fc, sc], f0 * n_labels + labels[f0]])
+    prev = ring[:0]
+    out = [ring]
+    for _ in range(rings):
+        f, k = np.divmod(ring, n_labels)
+        g = nbr[f]
+        keys = _unique_sorted((g * n_labels + k[:, None])[g >= 0])
+        keys = keys[~np.isin(keys, ring, assume_unique=True, kind="sort")]
+        keys = keys[~np.isin(keys, prev, assume_unique=True, kind="sort")]
+        if len(keys) == 0:
+            break
+        prev, ring = ring, keys
+        out.append(ring)
+    return np.sort(np.concatenate(out))
+
+
+def _heat_coefficients(t: float, tol: float = 1e-4) -> np.ndarray:
+    """Chebyshev coefficients of the heat kernel ``exp(-t (1 + x))`` on ``[-1, 1]``.
+
+    ``c_0 = e^-t I_0(t)``, ``c_k = 2 (-1)^k e^-t I_k(t)`` with ``I_k`` the modified Bessel
+    functions (from ``e^(-t x) = I_0(t) + 2 sum_k (-1)^k I_k(t) T_k(x)``), up to the last one
+    above ``tol``: 30 terms for ``t = 64``, 42 for ``t = 128``.
+
+    Returns
+    -------
+    (d,) float ndarray
+    """
+    k = np.arange(int(4 * np.sqrt(t) + 20))
+    c = 2.0 * ive(k, t) * (-1.0) ** k
+    c[0] /= 2.0
+    return c[: int(np.flatnonzero(np.abs(c) > tol).max()) + 1]
+
+
+def _round_charts(
+    nbr: np.ndarray,
+    P: np.ndarray,
+    labels: np.ndarray,
+    *,
+    diffusion_time: float,
+    rings: int | None = None,
+    iterations: int = 1,
+    min_faces: int = 1,
+) -> np.ndarray:
+    """Round the charts by threshold dynamics (MBO) on the face graph, near their borders only.
+
+    Each chart's indicator function is diffused by the heat kernel ``exp(-t L)`` of the
+    random-walk Laplacian ``L = I - P``; every face then joins the chart whose diffused indicator
+    is largest there. This moves the borders by their curvature (Merriman, Bence and Osher):
+    spurs and lobes recede, notches fill, jagged outlines straighten. Only the pairs (face,
+    chart) with the face within ``rings`` rings of that chart's border are diffused, as one
+    sparse system for all charts; beyond them a chart's indicator is held at 1 inside and 0
+    outside. The kernel is a Chebyshev expansion: about ``3.5 sqrt(t)`` sparse products instead
+    of the ``2 t`` steps of a lazy random walk.
+
+    Parameters
+    ----------
+    nbr : (m, w) int64 ndarray
+        Neighbours of every face, -1 in unused slots (see :func:`_neighbor_table`); labels
+        only spread along these edges.
+    P : (m, w) float ndarray
+        Random-walk transition probabilities along ``nbr``.
+    labels : (m,) int64 ndarray
+    diffusion_time : float
+        ``t``, in random-walk steps: borders are smoothed over about ``sqrt(t)`` rings.
+    rings : int, optional
+        Band width; default ``ceil(1.5 sqrt(t))``, where the result no longer changes (on the
+        100k brain: 12 faces of 2423 differ at ``1.4 sqrt(t)`` from a 40-ring band).
+    iterations : int
+        Rounds of diffuse-and-vote.
+    min_faces : int
+        A chart that would drop below this many faces (or below half its size) keeps its faces.
+
+    Returns
+    -------
+    (m,) int64 ndarray
+        New labels, same label set. A chart may fall into pieces (see
+        :func:`_relabel_components`) and leave ear triangles (see :func:`_smooth_boundaries`).
+
+    References
+    ----------
+    B. Merriman, J. Bence, S. Osher, "Motion of multiple junctions: a level set approach",
+    J. Comput. Phys. 112 (1994).
+    """
+    n_labels = int(labels.max()) + 1 if len(labels) else 0
+    if diffusion_time <= 0 or iterations <= 0 or n_labels < 2 or nbr.shape[1] == 0:
+        return labels
+    if rings is None:
+        rings = int(np.ceil(1.5 * np.sqrt(diffusion_time)))
+    width = nbr.shape[1]
+    coef = _heat_coefficients(diffusion_time).astype(np.float32)
+    for _ in range(iterations):
+        keys = _band_pairs(nbr, labels, n_labels, rings)
+        if len(keys) == 0:
+            break
+        f, k = np.divmod(keys, n_labels)
+        n = len(keys)
+        g = nbr[f]
+        gk = g * n_labels + k[:, None]
+        j = np.minimum(np.searchsorted(keys, gk), n - 1)
+        found = (g >= 0) & (keys[j] == gk)
+        Pf = P[f].astype(np.float32)
+        # Neighbours outside the band lie deep inside the chart (indicator 1) or outside (0).
+        inside = (g >= 0) & ~found & (labels[np.maximum(g, 0)] == k[:, None])
+        c = (Pf * inside).sum(axis=1)
+        rows = np.broadcast_to(np.arange(n)[:, None], (n, width))[found]
+        A = sp.csr_matrix((Pf[found], (rows, j[found])), shape=(n, n))
+        # Chebyshev recurrence T_k+1 = 2 x T_k - T_k-1 for x = L - I = -P, on the state (band
+        # values, held value a): x (v, a) = (-(A v + a c), -a).
+        t_prev = (labels[f] == k).astype(np.float32)
+        t_cur = -(A @ t_prev + c)
+        a_prev, a_cur = 1.0, -1.0
+        value = coef[0] * t_prev + coef[1] * t_cur
+        for ck in coef[2:]:
+            t_next = -2.0 * (A @ t_cur + a_cur * c) - t_prev
+            t_prev, t_cur, a_prev, a_cur = t_cur, t_next, a_cur, -2.0 * a_cur - a_prev
+            value += ck * t_cur
+        # Vote: the largest value per face; ties keep the current chart.
+        value += 1e-6 * (labels[f] == k)
+        order = np.lexsort((-value, f))
+        win = order[np.r_[True, f[order][1:] != f[order][:-1]]]
+        new = labels.copy()
+        new[f[win]] = k[win]
+        old_size = np.bincount(labels, minlength=n_labels)
+        new_size = np.bincount(new, minlength=n_labels)
+        shrunk = (new_size < np.maximum(min_faces, old_size // 2))[labels]
+        new[shrunk] = labels[shrunk]
         if np.array_equal(new, labels):
             break
         labels = new
@@ -442,11 +658,17 @@ def segment(
         labels[faces] = n_comp + offset + sub_labels
         offset += k
     labels = np.unique(labels, return_inverse=True)[1].ravel().astype(np.int64)
-    labels = _smooth_boundaries(F, labels, cfg.smoothing)
-    labels = _relabel_components(labels, W)
+    # Border clean-up sees only the edges inside feature regions: no label crosses an outline.
+    W_in = _within(W, comp)
+    nbr, P = _neighbor_table(W_in)
+    labels = _smooth_boundaries(nbr, labels, cfg.smoothing)
     min_faces = max(2, int(0.1 * m / max(target, n_comp)))
+    if cfg.rounding > 0:
+        labels = _round_charts(nbr, P, labels, diffusion_time=cfg.rounding, min_faces=min_faces)
+        labels = _smooth_boundaries(nbr, labels, cfg.smoothing)  # the vote leaves ears
+    labels = _relabel_components(labels, W)
     # Small charts join a neighbour inside their own feature region, never across its outline.
-    labels = _merge_small(labels, _within(W, comp), min_faces)
+    labels = _merge_small(labels, W_in, min_faces)
     labels = _make_disks(F, labels, W, seed)
     n = int(labels.max()) + 1
     log.info("segment: %d faces -> %d charts (target %d)", m, n, target)
