@@ -58,6 +58,7 @@ __all__ = [
     "SegmentConfig",
     "Segmentation",
     "face_affinity",
+    "divide",
     "fiedler_bisect",
     "integrated_curvature",
     "segment",
@@ -234,6 +235,30 @@ def fiedler_bisect(W: np.ndarray | sp.spmatrix, *, seed: int = 0) -> np.ndarray:
     side = np.zeros(m, dtype=bool)
     side[order[: m // 2]] = True
     return side
+
+
+def divide(W: sp.spmatrix, faces: np.ndarray, *, seed: int = 0) -> list[np.ndarray]:
+    """Cut a set of faces in pieces: its connected components if it has several, else the two
+    halves of :func:`fiedler_bisect` (either half may itself fall apart).
+
+    Parameters
+    ----------
+    W : (m, m) sparse matrix
+        Face affinity of the whole mesh.
+    faces : (k,) int ndarray
+        The faces to cut, ``k >= 2``.
+
+    Returns
+    -------
+    list of int ndarray
+        Disjoint subsets of `faces` covering it.
+    """
+    sub = W[faces][:, faces]
+    n_comp, comp = _cc(sub, directed=False)
+    if n_comp > 1:
+        return [faces[comp == k] for k in range(n_comp)]
+    side = fiedler_bisect(sub, seed=seed)
+    return [faces[side], faces[~side]]
 
 
 def _proxy_cells(W: sp.csr_matrix, n_cells: int, seed: int) -> np.ndarray:
@@ -573,14 +598,7 @@ def _make_disks(F: np.ndarray, labels: np.ndarray, W: sp.csr_matrix, seed: int) 
             continue
         if len(faces) == 1:
             continue  # a single triangle is always a disk; unreachable in practice
-        sub = W[faces][:, faces]
-        n_comp, comp = _cc(sub, directed=False)
-        if n_comp > 1:
-            parts = [faces[comp == k] for k in range(n_comp)]
-        else:
-            side = fiedler_bisect(sub, seed=seed)
-            parts = [faces[side], faces[~side]]
-            # A half may fall apart; its pieces are checked on their own.
+        parts = divide(W, faces, seed=seed)  # a half may fall apart: pieces are checked alone
         for part in parts[1:]:
             labels[part] = next_label
             queue.append(next_label)

@@ -23,13 +23,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components as _cc
 
 from .errors import ConfigError, InvalidMeshError
 from .mesh import check_mesh, face_areas, face_normals, is_disk, unit_frame
 from .parameterize import MIN_POINTS, parameterize_chart
 from .quality import ChartQuality, chart_quality
-from .segment import face_affinity, fiedler_bisect
+from .segment import divide, face_affinity
 
 log = logging.getLogger(__name__)
 
@@ -292,13 +291,7 @@ def _solve_source(
             continue
         if callable(W):
             W = W()
-        sub = W[faces][:, faces]
-        n_comp, comp = _cc(sub, directed=False)
-        if n_comp > 1:
-            parts = [faces[comp == k] for k in range(n_comp)]
-        else:
-            side = fiedler_bisect(sub, seed=seed)
-            parts = [faces[side], faces[~side]]
+        parts = divide(W, faces, seed=seed)
         stack.extend((p, depth + 1) for p in reversed(parts) if len(p))
     return pieces, first
 
