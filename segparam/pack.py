@@ -5,9 +5,9 @@ This stage
 
 1. scales each chart so that its uv area equals its 3-D area (one texel density for the atlas);
 2. rotates it to its minimum-area bounding box (rotating calipers on the convex hull);
-3. places all charts in the texture square, in any of the four quarter turns of that frame (never
-   mirrored), so that the charts' texel footprints are `padding` empty texels apart from each
-   other and from the border;
+3. places all charts in the texture square, turned by quarter turns of that frame or (charts
+   that are not rectangles) by finer steps, never mirrored, so that the charts' texel footprints
+   are `padding` empty texels apart from each other and from the border;
 4. maximizes the one global scale for which that placement exists, and reports the utilization.
 
 Two placement methods are offered:
@@ -16,42 +16,50 @@ Two placement methods are offered:
     Packs the charts' real shapes. Each chart is rasterized conservatively (every texel that a
     triangle touches is occupied; for a chart without flipped triangles this is computed from its
     outline and a winding-number fill, texel for texel the same as rasterizing every triangle and
-    3.5x faster on the brain charts). Charts are placed largest first. Each one goes, over its four
-    quarter turns, where the centroid of its footprint ends up lowest ("lowest gravity centre"),
-    avoiding the placed footprints dilated by `padding`. Candidates are the lowest fitting
-    position of every column of a coarse grid (about 342 cells a side, 3 texels per cell at
-    1024), found by FFT correlation on a band of rows just above the filled part; the best few
-    are refined texel by texel (slid down and left while they fit). The global scale is found by
-    a safeguarded secant search on the height a trial needs.
+    3.5x faster on the brain charts). Charts are placed largest first, each where the centroid of
+    its footprint ends up lowest ("lowest gravity centre"), avoiding the placed footprints
+    dilated by `padding`. Two placement rules propose the positions:
+
+    ``"rest"``
+        The chart comes straight down onto the skyline of the placed footprints, in any of
+        ``4 * angle_steps`` orientations (default: steps of 15 degrees) unless it is a rectangle
+        (its convex hull fills 95% of its minimum-area box: quarter turns only). Computed per
+        orientation as a max-plus correlation of the skyline with the footprint's lower profile;
+        the best starts are slid down and left texel by texel while they fit.
+    ``"holes"``
+        Quarter turns only, but anywhere there is room, also under overhangs and inside other
+        charts' concavities: the lowest fitting position of every column of a coarse grid (about
+        342 cells a side, 3 texels per cell at 1024), found by FFT correlation on a band of rows
+        just above the filled part, the best few refined the same way.
+
+    A trial packs the charts at one scale with one rule; a scale fits when either rule fits
+    (the first trial runs both, then the rule that needed less height goes first and the other
+    one runs only when the first overshot by at most 5%). The global scale is found by a
+    safeguarded secant search on the height a trial needs.
 ``"rect"``
     Packs the padded bounding boxes of the footprints with the MaxRects packer of `rectpack`,
     with the same search on the global scale.
 
-What limits the utilization (``benchmarks/bench_pack.py`` and the charts of the default
-pipeline, remeshing off, 1024 texels, padding 2). Sums over the charts of the brain-like 100k
-surface (48 charts) at the packed scale, as fractions of the unit square:
+Why two rules (``benchmarks/bench_pack.py`` and saved chart sets of the default pipeline,
+remeshing off, 1024 texels, padding 2). Similar-sized, rounded charts (the segmenter's charts
+of organic surfaces) pack like coins: what they need is to turn until their outline matches the
+neighbours'. With the "holes" rule alone, eight brain-like 100k-face surfaces (37-53 charts)
+packed at 0.671-0.692 (mean 0.684); finer rotations in that rule raised the mean to 0.685 (45
+degrees), 0.694 (22.5), 0.708 (15) and 0.710 (11.25 degrees), at 2-8x the time, as its FFT
+search runs per orientation. The skyline search costs far less per orientation, and with it the
+same eight atlases pack at 0.700-0.717 (mean 0.708). Alone, though, it loses the holes that
+small charts fill: the 50-chart synthetic sets (log-uniform sizes) drop from 0.757/0.752 to
+0.691/0.730 and the CAD plate from 0.716 to 0.658. Trying both per scale keeps the better of the
+two on every set measured (plate 0.716, synthetic 0.757/0.752, the wavy sheet's 68 charts 0.646
+-> 0.689, torus 0.575 -> 0.640), at 1.5-2x the time of one rule. Measured and not kept:
+candidates from both rules under the one lowest-centroid ranking (plate 0.686, synthetic 0.718),
+ranking by contact with the placed charts (0.678 on the brains), a coarse skyline (-0.5 points),
+running the second rule only when the first rule's last trial predicts a fit (misses fits: the
+layouts vary by 2-4% from one scale to the next).
 
-=========================  ============  ======  ==========================================
-area                       before        now     what it measures
-=========================  ============  ======  ==========================================
-charts (= utilization)     0.640         0.678
-convex hulls               0.740         0.784   the charts fill 86% of their hulls
-footprints                 0.656         0.694   conservative raster: +2.4%
-footprints + padding / 2   0.688         0.727   the area each chart really takes
-unit square inside border  0.992         0.992
-=========================  ============  ======  ==========================================
-
-So the charts' own shape (jagged outlines, spurs) and padding cost 7% of the square, the placement
-the remaining 27%. Against the previous placement (lowest top over two quarter turns, from the
-three lowest rows of a 256-cell grid), on six real atlases of 29-50 charts (brain-like surfaces of
-60k-150k faces, the CAD plate): the lowest centroid over four turns took the mean utilization from
-0.655 to 0.671, the finer grid to 0.679. Measured and not kept: ranking positions by the skyline
-area they waste (much worse), a look-ahead placing whichever of the next 4-8 charts sits lowest
-(0.63: it spends the small charts early), 45-degree rotations (``_ANGLES = 2``: +0.9 points, but
--1 to -3 on the synthetic sets, at twice the time), packing five orders and keeping the best
-(+1.5 points at 3x the time), extra trials just above the found scale (+0.2). Together they reach
-about 0.69 on the 100k-face brains at 10x the time: 0.70 is out of reach of packing these
-charts. Smoother outlines are not: the synthetic 50-chart sets (smooth shapes) pack at 0.75-0.76.
+Before these rules (one rule, quarter turns): ranking positions by the skyline area they waste
+(much worse), a look-ahead placing whichever of the next 4-8 charts sits lowest (0.63: it spends
+the small charts early), packing five orders and keeping the best (+1.5 points at 3x the time).
 
 Measured with ``benchmarks/bench_pack.py`` (padding 2, 1024 texels): see BENCHMARKS.md, section 4.
 
@@ -66,9 +74,11 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.fft
+from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike
 from scipy.ndimage import maximum_filter
 from scipy.spatial import ConvexHull, QhullError
@@ -98,10 +108,23 @@ _MARGIN = 1e-3
 _COARSE_CELLS = 342
 # Coarse rows added to twice the tallest footprint in a band of the position search.
 _BAND_EXTRA = 8
+# Fewest coarse rows of a band (small footprints would otherwise climb in many thin bands).
+_BAND_MIN = 64
 # Candidate positions (in order of preference) refined texel by texel, per orientation.
 _CANDIDATES = 4
-# Rotations tried per quarter turn (1: quarter turns of the minimum-area frame only).
-_ANGLES = 1
+# The resting rule: lowest resting positions kept per orientation, and the best starting
+# points (over all orientations) that are slid and ranked.
+_RESTING_PER_ORIENTATION = 2
+_RESTING_STARTS = 8
+# A chart whose convex hull fills at least this much of its minimum-area box is a rectangle for
+# the packer: it only turns by quarter turns.
+_BOXY = 0.95
+# After the first trial (which runs every rule), a trial tries the next placement rule only if
+# the previous one overshot the texture's side by at most this fraction: the rules' layouts
+# differ by a few percent (measured: the second rule fitted after overshoots of up to 4%).
+_RULE_MARGIN = 0.05
+# Placement rules of the raster packer, in the order a trial tries them first.
+_RULE_ORDER = ("rest", "holes")
 _SLIDE_STEPS = 1024
 # Scale search: relative precision on the global scale and the maximum number of trial packings.
 _SCALE_TOL = 0.006
@@ -125,7 +148,12 @@ class PackConfig:
     method : {"raster", "rect"}
         ``"raster"`` packs the charts' rasterized shapes, ``"rect"`` their bounding boxes.
     rotate : bool
-        Allow the charts to turn by quarter turns (90, 180, 270 degrees) while packing.
+        Allow the charts to turn while packing: by quarter turns (90, 180, 270 degrees), and by
+        finer steps in the "rest" placement rule (see `angle_steps`). False keeps every chart
+        in its minimum-area frame.
+    angle_steps : int
+        Rotations per quarter turn that the "rest" rule tries for charts that are not
+        rectangles: 6 means steps of 15 degrees; 1 means quarter turns only.
 
     Raises
     ------
@@ -137,6 +165,7 @@ class PackConfig:
     padding: int = 2
     method: str = "raster"
     rotate: bool = True
+    angle_steps: int = 6
 
     def __post_init__(self) -> None:
         if not isinstance(self.resolution, (int, np.integer)) or self.resolution < 1:
@@ -148,6 +177,8 @@ class PackConfig:
                 f"resolution {self.resolution} leaves no texel inside a border padding of "
                 f"{self.padding} texels on each side"
             )
+        if not isinstance(self.angle_steps, (int, np.integer)) or self.angle_steps < 1:
+            raise ConfigError(f"angle_steps must be a positive integer, got {self.angle_steps!r}")
         if self.method not in _METHODS:
             raise ConfigError(f"method must be one of {_METHODS}, got {self.method!r}")
 
@@ -194,6 +225,7 @@ class _Chart:
     extent: np.ndarray  # (2,) width and height of q's bounding box, 3-D units
     to_q: np.ndarray  # (3, 3) affine map from the input uv to q
     area: float  # 3-D area (= uv area of q)
+    boxy: bool  # its convex hull nearly fills its minimum-area box (turns by quarter turns only)
     boundary: np.ndarray | None  # (k, 2) directed boundary edges for `_fill_kernel`, or None
 
 
@@ -263,6 +295,13 @@ def _min_area_angle(uv: np.ndarray) -> float:
     if h[best] > w[best]:
         angle += np.pi / 2
     return float(np.arctan2(np.sin(angle), np.cos(angle)))
+
+
+def _hull_area(P: np.ndarray) -> float:
+    try:
+        return float(ConvexHull(P).volume)
+    except QhullError:
+        return 0.0
 
 
 def _triangle_areas(uv: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -491,7 +530,8 @@ def _prepare(
             F = F[:, [0, 2, 1]]
         # the outline rasterizer needs every triangle counter-clockwise (no flip, no sliver)
         boundary = _boundary_edges(F) if np.all(_triangle_areas(q, F) > 0) else None
-        charts.append(_Chart(i, uv, q, F, extent, to_q, a3, boundary))
+        boxy = _hull_area(q) >= _BOXY * float(extent[0] * extent[1])
+        charts.append(_Chart(i, uv, q, F, extent, to_q, a3, boxy, boundary))
     return charts
 
 
@@ -597,32 +637,61 @@ def _chart_mask(chart: _Chart, s: float, angle: float = 0.0) -> tuple[np.ndarray
 
 
 class _Footprint:
-    """A chart's footprint in one orientation, with what the raster packer needs of it."""
+    """A chart's footprint in one orientation, with what the raster packer needs of it.
+
+    Only the mask, its map and its centroid are computed up front; the rest is computed when a
+    placement rule first asks for it (the resting rule never needs the coarse grid).
+    """
 
     def __init__(self, mask: np.ndarray, block: int, to_tex: np.ndarray) -> None:
         self.mask = mask
+        self.block = block
         self.to_tex = to_tex  # (3, 3) affine from the chart's q to the texels of `mask`
-        rows, cols = mask.shape
+        rows = mask.shape[0]
         # centroid row of the texels: positions are ranked by the resulting centroid height
         self.cy = float(mask.sum(axis=1) @ np.arange(rows)) / max(int(mask.sum()), 1)
-        # texels newly covered by a one-texel move down / left: the lower / left edges
-        below = np.zeros_like(mask)
-        below[1:] = mask[:-1]
-        self.down = np.nonzero(mask & ~below)
-        left = np.zeros_like(mask)
-        left[:, 1:] = mask[:, :-1]
-        self.left = np.nonzero(mask & ~left)
-        crow, ccol = -(-rows // block) * block, -(-cols // block) * block
+
+    @cached_property
+    def down(self) -> tuple[np.ndarray, np.ndarray]:
+        """Texels newly covered by a one-texel move down: the footprint's lower edges."""
+        below = np.zeros_like(self.mask)
+        below[1:] = self.mask[:-1]
+        return np.nonzero(self.mask & ~below)
+
+    @cached_property
+    def left(self) -> tuple[np.ndarray, np.ndarray]:
+        """Texels newly covered by a one-texel move left: the footprint's left edges."""
+        left = np.zeros_like(self.mask)
+        left[:, 1:] = self.mask[:, :-1]
+        return np.nonzero(self.mask & ~left)
+
+    @cached_property
+    def bottom(self) -> np.ndarray:
+        """Per column, the lowest footprint row (a huge value for an empty column)."""
+        lowest = np.argmax(self.mask, axis=0).astype(np.int32)
+        return np.where(self.mask.any(axis=0), lowest, np.int32(1 << 30))
+
+    @cached_property
+    def coarse(self) -> np.ndarray:
+        """Block-wise "any" of the mask, on the canvas' coarse grid."""
+        b = self.block
+        rows, cols = self.mask.shape
+        crow, ccol = -(-rows // b) * b, -(-cols // b) * b
         padded = np.zeros((crow, ccol), dtype=bool)
-        padded[:rows, :cols] = mask
-        self.coarse = padded.reshape(crow // block, block, ccol // block, block).any(axis=(1, 3))
-        # the widest run of coarse cells of a row, as (row, length): a position needs a free
-        # run at least as long in that row
+        padded[:rows, :cols] = self.mask
+        return padded.reshape(crow // b, b, ccol // b, b).any(axis=(1, 3))
+
+    @cached_property
+    def widest(self) -> tuple[int, int]:
+        """The widest run of coarse cells of a row, as (row, length).
+
+        A position needs a free run at least as long in that row.
+        """
         edges = np.diff(self.coarse.astype(np.int8), axis=1, prepend=0, append=0)
         start_r, start_c = np.nonzero(edges == 1)
         _, end_c = np.nonzero(edges == -1)
         widest = int(np.argmax(end_c - start_c))
-        self.widest = (int(start_r[widest]), int(end_c[widest] - start_c[widest]))
+        return int(start_r[widest]), int(end_c[widest] - start_c[widest])
 
 
 class _Canvas:
@@ -633,6 +702,8 @@ class _Canvas:
     needed). ``forbid[i, j]`` is True where a new footprint texel may not go: the border band
     (left, right, bottom, and at the canvas top) and the placed footprints dilated by the
     padding. ``coarse`` is its block-wise "any", on which fitting positions are searched first.
+    ``sky[j]`` is one more than the highest forbidden texel of column j below the top border
+    (the canvas height in the side borders): everything above it is free.
     """
 
     def __init__(self, resolution: int, height: int, padding: int) -> None:
@@ -647,6 +718,9 @@ class _Canvas:
         # per coarse row: the longest run of free cells
         self.max_free_run = np.zeros(self.nr, dtype=np.int64)
         self._update_rows(0, self.nr)
+        self.sky = np.full(resolution, padding, dtype=np.int32)
+        self.sky[:padding] = height
+        self.sky[resolution - padding :] = height
 
     def _pool(self, grid: np.ndarray) -> np.ndarray:
         b = self.block
@@ -693,18 +767,25 @@ class _Canvas:
         while floor:
             y0 = min(floor.values())
             tallest = max(fps[k].coarse.shape[0] for k in floor)
-            h = min(scipy.fft.next_fast_len(2 * tallest + _BAND_EXTRA, real=True), nr - y0)
+            h = max(2 * tallest + _BAND_EXTRA, _BAND_MIN)
+            h = min(scipy.fft.next_fast_len(h, real=True), nr - y0)
             # single precision is plenty: every candidate is checked exactly by `fits`
             band = scipy.fft.rfft2(self.coarse[y0 : y0 + h].astype(np.float32))
-            for k in list(floor):
-                cmask = fps[k].coarse
-                r, c = cmask.shape
-                if r > h:  # it would reach past the canvas top
-                    del floor[k]
-                    continue
-                mhat = scipy.fft.rfft2(cmask.astype(np.float32), s=(h, nc))
-                corr = scipy.fft.irfft2(np.conj(mhat) * band, s=(h, nc))
-                free = corr[: h - r + 1, : nc - c + 1] < 0.5
+            for k in [k for k in floor if fps[k].coarse.shape[0] > h]:
+                del floor[k]  # it would reach past the canvas top
+            active = list(floor)
+            if not active:
+                break
+            # all orientations in one batched transform (one call, both cores)
+            stack = np.zeros((len(active), h, nc), dtype=np.float32)
+            for j, k in enumerate(active):
+                r, c = fps[k].coarse.shape
+                stack[j, :r, :c] = fps[k].coarse
+            mhat = scipy.fft.rfft2(stack, workers=-1)
+            corr_all = scipy.fft.irfft2(np.conj(mhat) * band, s=(h, nc), workers=-1)
+            for j, k in enumerate(active):
+                r, c = fps[k].coarse.shape
+                free = corr_all[j, : h - r + 1, : nc - c + 1] < 0.5
                 cols = np.flatnonzero(free.any(axis=0))
                 if len(cols):
                     rows = free[:, cols].argmax(axis=0)
@@ -755,6 +836,27 @@ class _Canvas:
             self.forbid[br0 * b : br1 * b, bc0 * b : bc1 * b]
         )
         self._update_rows(br0, br1)
+        # the skyline rises to the top of the dilated footprint in the columns it covers
+        top = r0 + grown.shape[0] - np.argmax(grown[::-1], axis=0)
+        top[~grown.any(axis=0)] = 0
+        self.sky[cc0:cc1] = np.maximum(self.sky[cc0:cc1], top[cc0 - c0 : cc1 - c0])
+
+    def resting(self, fp: _Footprint, count: int) -> list[tuple[int, int]]:
+        """The `count` lowest positions (then left-most) where the footprint rests on the skyline.
+
+        At column j the footprint's lowest texels must clear the skyline of every column it
+        covers: row(j) = max_c (sky[j + c] - bottom[c]). Such a position always fits, as nothing
+        above the skyline is forbidden; it is the only kind of position this search finds (no
+        holes under overhangs).
+        """
+        rows, cols = fp.mask.shape
+        if cols > self.width:
+            return []
+        lift = (sliding_window_view(self.sky, cols) - fp.bottom).max(axis=1)
+        lift = np.maximum(lift, 0)
+        ok = np.flatnonzero(lift + rows <= self.height - self.pad)
+        best = ok[np.lexsort((ok, lift[ok]))[:count]]
+        return [(int(lift[j]), int(j)) for j in best]
 
 
 def _orientations(chart: _Chart, s: float, block: int, turns: int, angles: int) -> list[_Footprint]:
@@ -777,24 +879,52 @@ def _orientations(chart: _Chart, s: float, block: int, turns: int, angles: int) 
     return out
 
 
-def _best_position(canvas: _Canvas, fps: list[_Footprint]) -> tuple[int, int, int] | None:
-    """The fitting position with the lowest footprint centroid over the orientations.
+def _lowest(
+    canvas: _Canvas, fps: list[_Footprint], positions: list[tuple[int, int, int]]
+) -> tuple[int, int, int] | None:
+    """Of (orientation, row, col) starting points, the one that slides to the lowest centroid.
 
-    Returns (orientation index, row, col). Each orientation's coarse candidates are refined
-    texel by texel (slid down and left while they fit), then ranked by the row of the
-    footprint's centroid, ties by column and orientation.
+    Each fitting start is refined texel by texel (slid down and left while it fits), then ranked
+    by the row of the footprint's centroid, ties by column and orientation.
     """
     best: tuple[tuple[float, int, int], tuple[int, int, int]] | None = None
-    for k, positions in enumerate(canvas.candidates(fps, _CANDIDATES)):
+    for k, row, col in positions:
         fp = fps[k]
-        for row, col in positions:
-            if not canvas.fits(fp, row, col):
-                continue
-            row, col = canvas.slide(fp, row, col)
-            key = (row + fp.cy, col, k)
-            if best is None or key < best[0]:
-                best = (key, (k, row, col))
+        if not canvas.fits(fp, row, col):
+            continue
+        row, col = canvas.slide(fp, row, col)
+        key = (row + fp.cy, col, k)
+        if best is None or key < best[0]:
+            best = (key, (k, row, col))
     return None if best is None else best[1]
+
+
+def _hole_position(canvas: _Canvas, fps: list[_Footprint]) -> tuple[int, int, int] | None:
+    """Placement rule "holes": the lowest fitting positions anywhere, from the coarse search.
+
+    Finds room under overhangs and inside other charts' concavities. Returns (orientation
+    index, row, col) or None.
+    """
+    found = canvas.candidates(fps, _CANDIDATES)
+    return _lowest(canvas, fps, [(k, r, c) for k, pos in enumerate(found) for r, c in pos])
+
+
+def _resting_position(canvas: _Canvas, fps: list[_Footprint]) -> tuple[int, int, int] | None:
+    """Placement rule "rest": positions on the skyline, for many orientations at little cost.
+
+    The best `_RESTING_STARTS` of all orientations' lowest resting positions (by centroid row)
+    are slid down and left, which can still tuck them under an overhang.
+    """
+    starts = []
+    for k, fp in enumerate(fps):
+        for row, col in canvas.resting(fp, _RESTING_PER_ORIENTATION):
+            starts.append((row + fp.cy, col, k, row))
+    starts.sort()
+    return _lowest(canvas, fps, [(k, row, col) for _, col, k, row in starts[:_RESTING_STARTS]])
+
+
+# placement rule -> (function, whether it turns charts by the extra angles)
+_RULES = {"holes": (_hole_position, False), "rest": (_resting_position, True)}
 
 
 def _raster_trial(
@@ -805,8 +935,12 @@ def _raster_trial(
     padding: int,
     turns: int,
     angles: int,
+    rule: str,
 ) -> tuple[list[tuple[np.ndarray, int, int]] | None, float, int | None]:
-    """Place all charts at scale s on a canvas 12.5% taller than the texture.
+    """Place all charts at scale s on a canvas 12.5% taller than the texture, by one rule.
+
+    `angles` rotations per quarter turn are tried by the "rest" rule, for the charts that are
+    not rectangles (`_Chart.boxy`); the "holes" rule turns by quarter turns only.
 
     Returns
     -------
@@ -818,14 +952,16 @@ def _raster_trial(
         Texture side the layout needs (top-most footprint row + 1 + padding); the layout is
         valid for the texture when ``need <= resolution``.
     """
+    position, turning = _RULES[rule]
     canvas = _Canvas(resolution, resolution + resolution // 8, padding)
     placed: list = [None] * len(charts)
     total = sum(ch.area for ch in charts)
     done = 0.0
     need = 0
     for i in order:
-        fps = _orientations(charts[i], s, canvas.block, turns, angles)
-        found = _best_position(canvas, fps)
+        steps = angles if turning and not charts[i].boxy else 1
+        fps = _orientations(charts[i], s, canvas.block, turns, steps)
+        found = position(canvas, fps)
         if found is None:
             return None, done / total, None
         k, row, col = found
@@ -849,6 +985,7 @@ def _rect_trial(
     padding: int,
     turns: int,
     angles: int,
+    rule: str = "boxes",
 ) -> tuple[list[tuple[np.ndarray, int, int]] | None, float, int | None]:
     """Pack the padded footprint boxes at scale s with rectpack's MaxRects.
 
@@ -953,32 +1090,50 @@ def pack_charts(
     cfg = PackConfig() if config is None else config
     charts = _prepare(uvs, faces, areas3d)
     G, p = int(cfg.resolution), int(cfg.padding)
-    turns, angles = (4, _ANGLES) if cfg.rotate else (1, 1)
-    trial = _raster_trial if cfg.method == "raster" else _rect_trial
+    turns, angles = (4, int(cfg.angle_steps)) if cfg.rotate else (1, 1)
+    if cfg.method == "raster":
+        trial, rules = _raster_trial, _RULE_ORDER
+    else:
+        trial, rules = _rect_trial, ("boxes",)
     # largest first; ties by the longer side, then by input order
     areas = np.array([ch.area for ch in charts])
     longest = np.array([ch.extent.max() for ch in charts])
     order = np.lexsort((np.arange(len(charts)), -longest, -areas))
 
-    # Safeguarded secant search on the scale. No scale above `hi` fits. A raster trial runs on
-    # a taller canvas and reports the height it needed, whose ratio to the texture predicts the
-    # scale (areas grow with its square); a failed trial reports the fraction of area it placed.
-    # Guesses outside the bracket's interior are replaced by bisection.
+    # Safeguarded secant search on the scale. No scale above `hi` fits. A scale fits when one
+    # of the placement rules fits the charts (the rules are tried in turn). A raster trial runs
+    # on a taller canvas and reports the height it needed, whose ratio to the texture predicts
+    # the scale (areas grow with its square); a failed trial reports the fraction of area it
+    # placed. Guesses outside the bracket's interior are replaced by bisection.
     hi = _scale_bounds(charts, G, p)
     lo, best = 0.0, None
     s = _FIRST_GUESS * hi
+    # The rule whose last trial needed the least height goes first. The first trial runs every
+    # rule; later ones try the next rule only when the previous one failed by a small margin.
+    last_need = dict.fromkeys(rules, 0.0)
     n_trials = 0
     for n_trials in range(1, _MAX_SHRINK + 1):  # noqa: B007
-        placed, fraction, need = trial(charts, order, s, G, p, turns, angles)
-        ok = placed is not None and (need is None or need <= G)
-        logger.debug("pack trial %d: scale %.6g need %s -> %s", n_trials, s, need, ok)
-        if ok:
+        placed, fraction, need = None, 0.0, None
+        for rule in sorted(rules, key=last_need.get):
+            got, frac, req = trial(charts, order, s, G, p, turns, angles, rule)
+            ok = got is not None and (req is None or req <= G)
+            logger.debug("pack trial %d (%s): scale %.6g need %s -> %s", n_trials, rule, s, req, ok)
+            last_need[rule] = np.inf if req is None else req
+            fraction = max(fraction, frac)
+            if req is not None and (need is None or req < need):
+                need = req
+            if ok:
+                placed = got
+                break
+            if n_trials > 1 and (req is None or req - 2 * p > (G - 2 * p) * (1 + _RULE_MARGIN)):
+                break  # too far over for another rule to make up
+        if placed is not None:
             lo, best = s, placed
         else:
             hi = s
         if best is not None and (hi / lo <= 1 + _SCALE_TOL or n_trials >= _MAX_TRIALS):
             break
-        if placed is None:
+        if placed is None and need is None:
             guess = s * float(np.clip(np.sqrt(fraction), 0.5, 0.97))
         elif need is not None:
             guess = s * float(np.sqrt((G - 2 * p) / max(need - 2 * p, 1)))

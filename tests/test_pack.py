@@ -363,18 +363,92 @@ def test_half_turns_let_two_trapezoids_tile_the_square() -> None:
     assert relative == pytest.approx(180.0, abs=1e-6)
 
 
-def test_extra_rotation_angles_keep_the_layout_valid(monkeypatch) -> None:
-    # rotations other than quarter turns (off by default) compose into the same kind of map
-    monkeypatch.setattr(pack_module, "_ANGLES", 3)
+@pytest.mark.parametrize("steps", [1, 3, 6])
+def test_angle_steps_keep_the_layout_valid(steps: int) -> None:
     uvs, faces, areas = mixed_charts(10, seed=9)
-    res = pack_charts(uvs, faces, areas, config=PackConfig(resolution=160))
+    res = pack_charts(uvs, faces, areas, config=PackConfig(resolution=160, angle_steps=steps))
     assert_valid_layout(res, faces)
     ratio = [area_uv(u, F) / a for u, F, a in zip(res.uvs, faces, areas, strict=True)]
     np.testing.assert_allclose(ratio, res.scale**2, rtol=1e-9)
-    turn = np.degrees([np.arctan2(A[1, 0], A[0, 0]) for A in res.transforms])
-    frames = [np.degrees(min_area_rotation(uv)[1]) for uv in uvs]
-    off_quarter = (turn - frames) % 90
-    assert np.any((off_quarter > 1) & (off_quarter < 89)), "no chart used a 30/60 degree turn"
+
+
+def _turns_off_quarter(uvs, transforms) -> np.ndarray:
+    """Per chart, its packed rotation off the quarter turns of its min-area frame (degrees)."""
+    turn = np.degrees([np.arctan2(A[1, 0], A[0, 0]) for A in transforms])
+    frames = np.array([np.degrees(min_area_rotation(uv)[1]) for uv in uvs])
+    off = (turn - frames) % 90
+    return np.minimum(off, 90 - off)
+
+
+def test_resting_rule_turns_round_charts_by_fine_angles_and_rectangles_by_quarter_turns() -> None:
+    # one trial of the "rest" rule with 30-degree steps: the discs and ellipses use the extra
+    # angles, the rectangles (hull = box) only quarter turns, and the layout is valid
+    uvs, faces, areas = mixed_charts(20, seed=9)
+    strip, Fs = grid(5, 2)
+    uvs, faces, areas = [*uvs, rotate(strip, 0.3)], [*faces, Fs], np.r_[areas, areas.max()]
+    charts = pack_module._prepare(uvs, faces, areas)
+    boxy = np.array([ch.boxy for ch in charts])
+    assert boxy[-1] and not boxy[0] and not boxy[1]  # the strip; a disc and an ellipse are not
+    order = np.argsort([-ch.area for ch in charts], kind="stable")
+    s = 0.7 * pack_module._scale_bounds(charts, 160, 2)
+    placed, fraction, need = pack_module._raster_trial(charts, order, s, 160, 2, 4, 3, "rest")
+    assert placed is not None and fraction == 1.0 and need <= 160
+    res = pack_module._finish(charts, placed, s, 160, 2, 1, "raster")
+    assert_valid_layout(res, faces)
+    off = _turns_off_quarter(uvs, res.transforms)
+    assert np.all(off[boxy] < 1e-6)
+    assert np.any(off[~boxy] > 29), "no round chart used a 30 or 60 degree turn"
+    assert np.all(np.isclose(off % 30, 0, atol=1e-6) | np.isclose(off % 30, 30, atol=1e-6))
+
+
+def test_no_fine_angles_with_one_step_or_without_rotation() -> None:
+    uvs, faces, areas = mixed_charts(10, seed=9)
+    configs = [PackConfig(resolution=160, angle_steps=1), PackConfig(resolution=160, rotate=False)]
+    for cfg in configs:
+        res = pack_charts(uvs, faces, areas, config=cfg)
+        assert np.all(_turns_off_quarter(uvs, res.transforms) < 1e-6)
+
+
+def test_resting_positions_are_the_lowest_drop_positions() -> None:
+    # a footprint "rests" at (row, col) when it can come straight down from the top to there:
+    # it fits at that row and at every row above. The skyline search must return, per column,
+    # the lowest such row (brute force below), lowest first.
+    rng = np.random.default_rng(1)
+    canvas = pack_module._Canvas(64, 72, 1)
+    for _ in range(6):
+        blob = rng.random((int(rng.integers(3, 12)), int(rng.integers(3, 12)))) < 0.7
+        fp = pack_module._Footprint(blob | (np.arange(blob.shape[1]) == 0), 1, np.eye(3))
+        pos = canvas.resting(fp, 1)
+        if pos:
+            canvas.place(fp, *pos[0])
+    fp = pack_module._Footprint(np.tri(9, 14, 4, dtype=bool)[::-1], 1, np.eye(3))
+    r, c = fp.mask.shape
+    top = 72 - 1 - r  # highest row inside the top border
+    lowest = {}
+    for col in range(64 - c + 1):
+        if not canvas.fits(fp, top, col):
+            continue
+        row = top
+        while row > 0 and canvas.fits(fp, row - 1, col):
+            row -= 1
+        lowest[col] = row
+    got = canvas.resting(fp, 10**6)
+    assert got, "the canvas still has room"
+    rows = [row for row, _ in got]
+    assert rows == sorted(rows) and rows[0] == min(lowest.values())
+    assert {col: row for row, col in got} == lowest
+
+
+def test_a_scale_fits_when_either_rule_fits(monkeypatch) -> None:
+    # with the "rest" rule disabled the "holes" rule alone still packs every chart; with both,
+    # the packer keeps whichever layout fits
+    uvs, faces, areas = mixed_charts(12, seed=5)
+    both = pack_charts(uvs, faces, areas, config=PackConfig(resolution=192))
+    monkeypatch.setitem(pack_module._RULES, "rest", (lambda canvas, fps: None, True))
+    alone = pack_charts(uvs, faces, areas, config=PackConfig(resolution=192))
+    assert_valid_layout(alone, faces)
+    assert_valid_layout(both, faces)
+    assert np.all(_turns_off_quarter(uvs, alone.transforms) < 1e-6)
 
 
 def test_folded_chart_uses_the_triangle_rasterizer() -> None:
@@ -472,7 +546,14 @@ def test_bad_input_raises(uvs, faces, areas, match) -> None:
 
 @pytest.mark.parametrize(
     "kwargs",
-    [{"resolution": 0}, {"padding": -1}, {"resolution": 4, "padding": 2}, {"method": "skyline"}],
+    [
+        {"resolution": 0},
+        {"padding": -1},
+        {"resolution": 4, "padding": 2},
+        {"method": "skyline"},
+        {"angle_steps": 0},
+        {"angle_steps": 1.5},
+    ],
 )
 def test_bad_config_raises(kwargs) -> None:
     with pytest.raises(ConfigError):
