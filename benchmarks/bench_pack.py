@@ -19,6 +19,8 @@ Chart sets are generated in code:
 Usage::
 
     python benchmarks/bench_pack.py [--out benchmarks/results/pack.json] [--resolutions 512 1024]
+    python benchmarks/bench_pack.py --resolutions --no-atlas --brain-seeds 8 \
+        --out benchmarks/results/pack_brains.json    # eight brain atlases, each rule alone
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from segparam import pack as pack_module
 from segparam.pack import PackConfig, footprint_conflicts, pack_charts
 
 # ----------------------------------------------------------------------------------------------
@@ -134,7 +137,7 @@ def _area(uv: np.ndarray, F: np.ndarray) -> float:
 # segparam's own charts
 
 
-def atlas_set(n_faces: int) -> tuple[list, list, np.ndarray]:
+def atlas_set(n_faces: int, seed: int = 0) -> tuple[list, list, np.ndarray]:
     """The charts of the default pipeline (remeshing off) on a brain-like surface, unpacked."""
     from segparam.clean import clean
     from segparam.mesh import face_areas
@@ -145,7 +148,7 @@ def atlas_set(n_faces: int) -> tuple[list, list, np.ndarray]:
     from segparam.synthetic import brain_like_surface
 
     cfg = PipelineConfig().replace(remesh={"mode": "off"})
-    cleaned = clean(*brain_like_surface(n_faces))
+    cleaned = clean(*brain_like_surface(n_faces, seed=seed))
     mesh = remesh(cleaned.V, cleaned.F, config=cfg.remesh)
     seg = segment(mesh.V, mesh.F, config=cfg.segment, seed=0)
     charts = parameterize_charts(mesh.V, mesh.F, seg.labels, config=cfg.split, seed=0).charts
@@ -225,10 +228,18 @@ def xatlas_charts(V: np.ndarray, F: np.ndarray, resolution: int, padding: int):
 
 
 def run_one(name, uvs, faces, areas, method, resolution, padding, verify):
-    cfg = PackConfig(resolution=resolution, padding=padding, method=method)
-    t0 = time.perf_counter()
-    res = pack_charts(uvs, faces, areas, config=cfg)
-    dt = time.perf_counter() - t0
+    """Pack one set. `method` "raster-rest" / "raster-holes" is the raster packer with that one
+    placement rule only (the packer before the "rest" rule was "raster-holes")."""
+    cfg = PackConfig(resolution=resolution, padding=padding, method=method.split("-")[0])
+    rules = pack_module._RULE_ORDER
+    if "-" in method:
+        pack_module._RULE_ORDER = (method.split("-")[1],)
+    try:
+        t0 = time.perf_counter()
+        res = pack_charts(uvs, faces, areas, config=cfg)
+        dt = time.perf_counter() - t0
+    finally:
+        pack_module._RULE_ORDER = rules
     row = {
         "set": name,
         "method": method,
@@ -248,10 +259,17 @@ def run_one(name, uvs, faces, areas, method, resolution, padding, verify):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="benchmarks/results/pack.json")
-    ap.add_argument("--resolutions", type=int, nargs="+", default=[512, 1024, 2048])
+    ap.add_argument("--resolutions", type=int, nargs="*", default=[512, 1024, 2048])
     ap.add_argument("--padding", type=int, default=2)
     ap.add_argument("--no-verify", action="store_true", help="skip the footprint check")
     ap.add_argument("--no-atlas", action="store_true", help="skip the pipeline's brain charts")
+    ap.add_argument(
+        "--brain-seeds",
+        type=int,
+        default=0,
+        help="also pack the atlases of N brain-like 100k surfaces (seeds 0..N-1) at 1024, with "
+        "both placement rules and with each rule alone",
+    )
     args = ap.parse_args()
 
     sets = {
@@ -302,6 +320,19 @@ def main() -> None:
                 r = run_one(name, uvs, faces, areas, method, res, args.padding, not args.no_verify)
                 rows.append(r)
                 show(r)
+    by_method: dict[str, list[float]] = {}
+    for seed in range(args.brain_seeds):
+        uvs, faces, areas = atlas_set(100_000, seed)
+        for method in ("raster", "raster-rest", "raster-holes"):
+            r = run_one(f"brain-100k s{seed}", uvs, faces, areas, method, 1024, args.padding, False)
+            rows.append(r)
+            show(r)
+            by_method.setdefault(method, []).append(r["utilization"])
+    for method, u in by_method.items():
+        print(
+            f"brain-100k seeds 0-{args.brain_seeds - 1}, {method}: mean {np.mean(u):.4f}, "
+            f"min {np.min(u):.4f}, max {np.max(u):.4f}"
+        )
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     meta = {"python": platform.python_version(), "machine": platform.machine()}

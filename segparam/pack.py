@@ -116,6 +116,8 @@ _CANDIDATES = 4
 # points (over all orientations) that are slid and ranked.
 _RESTING_PER_ORIENTATION = 2
 _RESTING_STARTS = 8
+# Footprint columns sampled for the lower bound of the resting search.
+_SKY_SAMPLES = 16
 # A chart whose convex hull fills at least this much of its minimum-area box is a rectangle for
 # the packer: it only turns by quarter turns.
 _BOXY = 0.95
@@ -848,15 +850,35 @@ class _Canvas:
         covers: row(j) = max_c (sky[j + c] - bottom[c]). Such a position always fits, as nothing
         above the skyline is forbidden; it is the only kind of position this search finds (no
         holes under overhangs).
+
+        The maximum over a sample of about `_SKY_SAMPLES` of the footprint's columns is a lower
+        bound of row(j) that costs a fraction of it; the exact rows are computed only for the
+        columns with the lowest bounds, as many as it takes to prove that no other column can
+        come lower (branch and bound: the result is the full computation's).
         """
         rows, cols = fp.mask.shape
         if cols > self.width:
             return []
-        lift = (sliding_window_view(self.sky, cols) - fp.bottom).max(axis=1)
-        lift = np.maximum(lift, 0)
-        ok = np.flatnonzero(lift + rows <= self.height - self.pad)
-        best = ok[np.lexsort((ok, lift[ok]))[:count]]
-        return [(int(lift[j]), int(j)) for j in best]
+        windows = sliding_window_view(self.sky, cols)  # (positions, cols), a view
+        top = self.height - self.pad - rows  # highest row inside the top border
+        step = max(1, cols // _SKY_SAMPLES)
+        sample = np.unique(np.r_[np.arange(0, cols, step), np.argmin(fp.bottom)])
+        bound = (windows[:, sample] - fp.bottom[sample]).max(axis=1)
+        order = np.lexsort((np.arange(len(bound)), bound))
+        m = min(len(order), 4 * count)
+        while True:
+            cand = order[:m]
+            lift = np.maximum((windows[cand] - fp.bottom).max(axis=1), 0)
+            keep = lift <= top
+            cand, lift = cand[keep], lift[keep]
+            best = np.lexsort((cand, lift))[:count]
+            if m == len(order):
+                break
+            # every column not evaluated has a bound at least bound[order[m]]
+            if len(best) == count and lift[best[-1]] < bound[order[m]]:
+                break
+            m = min(len(order), 4 * m)
+        return [(int(lift[i]), int(cand[i])) for i in best]
 
 
 def _orientations(chart: _Chart, s: float, block: int, turns: int, angles: int) -> list[_Footprint]:

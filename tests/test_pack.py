@@ -439,6 +439,29 @@ def test_resting_positions_are_the_lowest_drop_positions() -> None:
     assert {col: row for row, col in got} == lowest
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_resting_search_bound_gives_the_full_searchs_answer(seed: int) -> None:
+    # the branch-and-bound search must return exactly the `count` best of the full max-plus
+    # correlation, on rough skylines where the sampled bound is loose
+    rng = np.random.default_rng(seed)
+    canvas = pack_module._Canvas(300, 340, 2)
+    canvas.sky[2:-2] = np.cumsum(rng.integers(-6, 7, 296)).clip(-40, 200) + 60
+    for _ in range(5):
+        mask = np.tri(int(rng.integers(5, 60)), int(rng.integers(20, 200)), 0, dtype=bool)
+        mask = mask[:, ::-1] if rng.random() < 0.5 else mask
+        mask |= rng.random(mask.shape) < 0.3
+        fp = pack_module._Footprint(mask, 1, np.eye(3))
+        rows, cols = mask.shape
+        full = np.maximum(
+            (np.lib.stride_tricks.sliding_window_view(canvas.sky, cols) - fp.bottom).max(axis=1),
+            0,
+        )
+        x = np.flatnonzero(full <= canvas.height - canvas.pad - rows)
+        for count in (1, 2, 7):
+            best = x[np.lexsort((x, full[x]))[:count]]
+            assert canvas.resting(fp, count) == [(int(full[j]), int(j)) for j in best]
+
+
 def test_a_scale_fits_when_either_rule_fits(monkeypatch) -> None:
     # with the "rest" rule disabled the "holes" rule alone still packs every chart; with both,
     # the packer keeps whichever layout fits
