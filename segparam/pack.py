@@ -649,9 +649,9 @@ class _Footprint:
         self.mask = mask
         self.block = block
         self.to_tex = to_tex  # (3, 3) affine from the chart's q to the texels of `mask`
-        rows = mask.shape[0]
         # centroid row of the texels: positions are ranked by the resulting centroid height
-        self.cy = float(mask.sum(axis=1) @ np.arange(rows)) / max(int(mask.sum()), 1)
+        per_row = np.count_nonzero(mask, axis=1)
+        self.cy = float(per_row @ np.arange(len(per_row))) / max(int(per_row.sum()), 1)
 
     @cached_property
     def down(self) -> tuple[np.ndarray, np.ndarray]:
@@ -670,8 +670,9 @@ class _Footprint:
     @cached_property
     def bottom(self) -> np.ndarray:
         """Per column, the lowest footprint row (a huge value for an empty column)."""
-        lowest = np.argmax(self.mask, axis=0).astype(np.int32)
-        return np.where(self.mask.any(axis=0), lowest, np.int32(1 << 30))
+        lowest = np.argmax(self.mask, axis=0)
+        empty = ~self.mask[lowest, np.arange(self.mask.shape[1])]
+        return np.where(empty, np.int32(1 << 30), lowest.astype(np.int32))
 
     @cached_property
     def coarse(self) -> np.ndarray:
@@ -891,13 +892,18 @@ def _orientations(chart: _Chart, s: float, block: int, turns: int, angles: int) 
     for a in range(angles):
         mask, to_tex = _chart_mask(chart, s, a * np.pi / (2 * angles))
         rows, cols = mask.shape
-        seen: list[np.ndarray] = []
+        seen: list[_Footprint] = []
         for k in range(turns):
-            m = np.rot90(mask, -k)
-            if any(m.shape == x.shape and np.array_equal(m, x) for x in seen):
+            fp = _Footprint(
+                np.ascontiguousarray(np.rot90(mask, -k)), block, _turn(k, cols, rows) @ to_tex
+            )
+            if any(
+                f.mask.shape == fp.mask.shape and f.cy == fp.cy and np.array_equal(f.mask, fp.mask)
+                for f in seen
+            ):
                 continue
-            seen.append(m)
-            out.append(_Footprint(m, block, _turn(k, cols, rows) @ to_tex))
+            seen.append(fp)
+        out += seen
     return out
 
 
