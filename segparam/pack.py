@@ -24,8 +24,9 @@ Two placement methods are offered:
         The chart comes straight down onto the skyline of the placed footprints, in any of
         ``4 * angle_steps`` orientations (default: steps of 15 degrees) unless it is a rectangle
         (its convex hull fills 95% of its minimum-area box: quarter turns only). Computed per
-        orientation as a max-plus correlation of the skyline with the footprint's lower profile;
-        the best starts are slid down and left texel by texel while they fit.
+        orientation as a max-plus correlation of the skyline with the footprint's lower profile
+        (by branch and bound on a sampled bound); the best starts are slid down and left texel
+        by texel while they fit.
     ``"holes"``
         Quarter turns only, but anywhere there is room, also under overhangs and inside other
         charts' concavities: the lowest fitting position of every column of a coarse grid (about
@@ -49,13 +50,14 @@ degrees), 0.694 (22.5), 0.708 (15) and 0.710 (11.25 degrees), at 2-8x the time, 
 search runs per orientation. The skyline search costs far less per orientation, and with it the
 same eight atlases pack at 0.700-0.717 (mean 0.708). Alone, though, it loses the holes that
 small charts fill: the 50-chart synthetic sets (log-uniform sizes) drop from 0.757/0.752 to
-0.691/0.730 and the CAD plate from 0.716 to 0.658. Trying both per scale keeps the better of the
-two on every set measured (plate 0.716, synthetic 0.757/0.752, the wavy sheet's 68 charts 0.646
--> 0.689, torus 0.575 -> 0.640), at 1.5-2x the time of one rule. Measured and not kept:
-candidates from both rules under the one lowest-centroid ranking (plate 0.686, synthetic 0.718),
-ranking by contact with the placed charts (0.678 on the brains), a coarse skyline (-0.5 points),
-running the second rule only when the first rule's last trial predicts a fit (misses fits: the
-layouts vary by 2-4% from one scale to the next).
+0.691/0.730 and the CAD plate from 0.716 to 0.658. Trying both per scale comes within the
+search's noise of the better rule on every set measured (plate 0.716, synthetic 0.757/0.752, the
+wavy sheet's 68 charts 0.646 -> 0.689, torus 0.575 -> 0.640; brains: mean 0.708 as with "rest"
+alone, seed 0 0.707 against 0.697, seed 5 0.705 against 0.717), at 1.5-2x the time of one rule.
+Measured and not kept: candidates from both rules under the one lowest-centroid ranking (plate
+0.686, synthetic 0.718), ranking by contact with the placed charts (0.678 on the brains), a
+coarse skyline (-0.5 points), running the second rule only when the first rule's last trial
+predicts a fit (misses fits: the layouts vary by 2-4% from one scale to the next).
 
 Before these rules (one rule, quarter turns): ranking positions by the skyline area they waste
 (much worse), a look-ahead placing whichever of the next 4-8 charts sits lowest (0.63: it spends
