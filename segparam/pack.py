@@ -266,7 +266,7 @@ def min_area_rotation(uv: np.ndarray) -> tuple[np.ndarray, float]:
         raise InvalidMeshError(f"uv must be an (n, 2) array with n >= 3, got shape {uv.shape}")
     if not np.all(np.isfinite(uv)):
         raise InvalidMeshError("uv has non-finite coordinates")
-    angle = _min_area_angle(uv)
+    angle, _ = _min_area_angle(uv)
     return uv @ _rotation(angle).T, angle
 
 
@@ -275,7 +275,12 @@ def _rotation(angle: float) -> np.ndarray:
     return np.array([[c, -s], [s, c]])
 
 
-def _min_area_angle(uv: np.ndarray) -> float:
+def _min_area_angle(uv: np.ndarray) -> tuple[float, float]:
+    """The rotation that makes the minimum-area box axis-aligned, and the hull's fill of that box.
+
+    The fill (convex hull area / box area, 1 for a rectangle) is what tells the packer that a
+    chart is a rectangle.
+    """
     centred = uv - uv.mean(axis=0)
     try:
         hull = ConvexHull(centred)
@@ -298,14 +303,7 @@ def _min_area_angle(uv: np.ndarray) -> float:
     angle = -theta[best]
     if h[best] > w[best]:
         angle += np.pi / 2
-    return float(np.arctan2(np.sin(angle), np.cos(angle)))
-
-
-def _hull_area(P: np.ndarray) -> float:
-    try:
-        return float(ConvexHull(P).volume)
-    except QhullError:
-        return 0.0
+    return float(np.arctan2(np.sin(angle), np.cos(angle))), float(hull.volume / area[best])
 
 
 def _triangle_areas(uv: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -518,7 +516,7 @@ def _prepare(
                 "mapped to the plane with a positive area"
             )
         try:
-            angle = _min_area_angle(uv)
+            angle, fill = _min_area_angle(uv)
         except InvalidMeshError as exc:
             raise InvalidMeshError(f"chart {i}: {exc}") from exc
         k = np.sqrt(a3 / area_uv)
@@ -534,8 +532,7 @@ def _prepare(
             F = F[:, [0, 2, 1]]
         # the outline rasterizer needs every triangle counter-clockwise (no flip, no sliver)
         boundary = _boundary_edges(F) if np.all(_triangle_areas(q, F) > 0) else None
-        boxy = _hull_area(q) >= _BOXY * float(extent[0] * extent[1])
-        charts.append(_Chart(i, uv, q, F, extent, to_q, a3, boxy, boundary))
+        charts.append(_Chart(i, uv, q, F, extent, to_q, a3, fill >= _BOXY, boundary))
     return charts
 
 
