@@ -12,6 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from segparam import canvas, raster
 from segparam import pack as pack_module
 from segparam.errors import ConfigError, InvalidMeshError
 from segparam.pack import (
@@ -225,7 +226,7 @@ def test_outline_fill_rasterizer_matches_triangle_rasterizer(seed: int) -> None:
     ]
     for uv, F in shapes:
         F = ccw(uv, F)
-        B = pack_module._boundary_edges(F)
+        B = raster.boundary_edges(F)
         assert B is not None
         for _ in range(4):
             P = rotate(uv, rng.uniform(0, 2 * np.pi)) * rng.uniform(0.3, 9)
@@ -233,46 +234,93 @@ def test_outline_fill_rasterizer_matches_triangle_rasterizer(seed: int) -> None:
             if rng.random() < 0.5:  # vertices on texel lines, the delicate cases
                 P = np.round(P * 2) / 2 + 0.0
             shape = tuple(int(v) for v in np.floor(P.max(axis=0))[::-1] + 2)
-            want = pack_module._raster_kernel(P, F, shape, 1e-4)
-            got = pack_module._fill_kernel(P, B, shape, 1e-4)
+            want = raster.rasterize_triangles(P, F, shape, 1e-4)
+            got = raster.fill_outline(P, B, shape, 1e-4)
             assert np.array_equal(got, want)
 
 
 def test_boundary_edges_refuses_meshes_the_fill_cannot_handle() -> None:
     uv, F = grid(2, 1)
     F = ccw(uv, F)
-    assert len(pack_module._boundary_edges(F)) == 6  # the outline of two unit squares
+    assert len(raster.boundary_edges(F)) == 6  # the outline of two unit squares
     fan = np.array([[0, 1, 2], [0, 1, 3], [1, 0, 4]])  # edge 0-1 in three triangles
-    assert pack_module._boundary_edges(fan) is None
+    assert raster.boundary_edges(fan) is None
     twice = np.array([[0, 1, 2], [0, 1, 3]])  # directed edge 0->1 used twice
-    assert pack_module._boundary_edges(twice) is None
+    assert raster.boundary_edges(twice) is None
+
+
+def _canvas_with_blobs(width: int, height: int, pad: int, seed: int, rule: str):
+    """A canvas (block 1) with six random blobs placed by one rule's search, and its state."""
+    rng = np.random.default_rng(seed)
+    forbid, sky, coarse, prefix, max_free = canvas.new_canvas(width, height, pad, 1)
+    sky_min = np.empty(-(-width // canvas._SKY_BLOCK), dtype=np.int64)
+    canvas._sky_minima(sky, sky_min, 0, width)
+    for _ in range(6):
+        blob = rng.random((int(rng.integers(3, 12)), int(rng.integers(3, 12)))) < 0.7
+        blob |= np.arange(blob.shape[1]) == 0
+        r, c = blob.shape
+        if rule == "holes":
+            runs, cr, cc = canvas.coarse_runs(blob, r, c, 1)
+            got, rows, cols = canvas.holes(prefix, max_free, runs, cr, cc, 1)
+        else:
+            bottom = np.where(blob.any(axis=0), np.argmax(blob, axis=0), canvas._EMPTY)
+            got, rows, cols = canvas.resting(
+                bottom.astype(np.int64), c, sky, sky_min, height - pad - r, 1, 16
+            )
+        if got:
+            row, col = canvas.slide(forbid, blob, r, c, int(rows[0]), int(cols[0]), 1024)
+            canvas.place(forbid, sky, coarse, prefix, max_free, 1, blob, r, c, row, col, pad)
+            canvas._sky_minima(sky, sky_min, 0, width)
+    return forbid, sky, sky_min, prefix, max_free
+
+
+def _fits(forbid, mask, row, col) -> bool:
+    r, c = mask.shape
+    return bool(canvas.fits(forbid, forbid.shape[0], forbid.shape[1], mask, r, c, row, col))
 
 
 def test_candidates_are_the_lowest_fitting_positions_per_column() -> None:
-    # at resolution 64 the coarse grid is the texel grid, so the band search must return
-    # exactly the lowest fitting row of each column (brute force below), lowest first
-    rng = np.random.default_rng(0)
-    canvas = pack_module._Canvas(64, 72, 1)
-    assert canvas.block == 1
-    for _ in range(6):
-        blob = rng.random((int(rng.integers(3, 12)), int(rng.integers(3, 12)))) < 0.7
-        fp = pack_module._Footprint(blob | (np.arange(blob.shape[1]) == 0), 1, np.eye(3))
-        pos = canvas.candidates([fp], 1)[0]
-        if pos:
-            canvas.place(fp, *canvas.slide(fp, *pos[0]))
-    fp = pack_module._Footprint(np.tri(9, 14, 4, dtype=bool), 1, np.eye(3))
-    r, c = fp.mask.shape
+    # with one texel per coarse cell the hole search must return exactly the lowest fitting
+    # row of each column (brute force below), lowest first
+    forbid, _, _, prefix, max_free = _canvas_with_blobs(64, 72, 1, 0, "holes")
+    fp = np.tri(9, 14, 4, dtype=bool)
+    r, c = fp.shape
     lowest = {}
     for col in range(64 - c + 1):
         for row in range(72 - r + 1):
-            if canvas.fits(fp, row, col):
+            if _fits(forbid, fp, row, col):
                 lowest[col] = row
                 break
-    got = canvas.candidates([fp], 10**6)[0]
+    runs, cr, cc = canvas.coarse_runs(fp, r, c, 1)
+    got, rows, cols = canvas.holes(prefix, max_free, runs, cr, cc, 10**4)
     assert got, "the canvas still has room"
-    rows = [row for row, _ in got]
+    rows, cols = rows[:got].tolist(), cols[:got].tolist()
     assert rows == sorted(rows) and rows[0] == min(lowest.values())
-    assert {col: row for row, col in got} == lowest
+    assert dict(zip(cols, rows, strict=True)) == lowest
+
+
+def test_coarse_hole_search_never_misses_a_free_coarse_position() -> None:
+    # with 3-texel cells a position is reported only where the coarse footprint meets no
+    # forbidden cell, and every such position of the lowest row is reported
+    forbid, _, _, _, _ = _canvas_with_blobs(96, 108, 1, 3, "holes")
+    _, _, coarse, prefix, max_free = canvas.new_canvas(96, 108, 1, 3)
+    canvas._pool_rows(forbid, 3, coarse, prefix, max_free, 0, coarse.shape[0], 0, coarse.shape[1])
+    fp = np.tri(10, 16, 5, dtype=bool)
+    runs, cr, cc = canvas.coarse_runs(fp, *fp.shape, 3)
+    cfp = np.zeros((cr, cc), dtype=bool)
+    for i, c0, c1 in runs:
+        cfp[i, c0 : c1 + 1] = True
+    free = {
+        (y, j)
+        for y in range(coarse.shape[0] - cr + 1)
+        for j in range(coarse.shape[1] - cc + 1)
+        if not (coarse[y : y + cr, j : j + cc] & cfp).any()
+    }
+    got, rows, cols = canvas.holes(prefix, max_free, runs, cr, cc, 10**4)
+    found = set(zip(rows[:got].tolist(), cols[:got].tolist(), strict=True))
+    assert found <= free
+    lowest = min(y for y, _ in free)
+    assert {p for p in free if p[0] == lowest} <= found
 
 
 # ----------------------------------------------------------------------------------------------
@@ -391,7 +439,8 @@ def test_resting_rule_turns_round_charts_by_fine_angles_and_rectangles_by_quarte
     assert boxy[-1] and not boxy[0] and not boxy[1]  # the strip; a disc and an ellipse are not
     order = np.argsort([-ch.area for ch in charts], kind="stable")
     s = 0.7 * pack_module._scale_bounds(charts, 160, 2)
-    placed, fraction, need = pack_module._raster_trial(charts, order, s, 160, 2, 4, 3, "rest")
+    angles = pack_module._Angles(charts, 3)
+    placed, fraction, need = pack_module._raster_trial(charts, order, s, 160, 2, 4, "rest", angles)
     assert placed is not None and fraction == 1.0 and need <= 160
     res = pack_module._finish(charts, placed, s, 160, 2, 1, "raster")
     assert_valid_layout(res, faces)
@@ -413,53 +462,74 @@ def test_resting_positions_are_the_lowest_drop_positions() -> None:
     # a footprint "rests" at (row, col) when it can come straight down from the top to there:
     # it fits at that row and at every row above. The skyline search must return, per column,
     # the lowest such row (brute force below), lowest first.
-    rng = np.random.default_rng(1)
-    canvas = pack_module._Canvas(64, 72, 1)
-    for _ in range(6):
-        blob = rng.random((int(rng.integers(3, 12)), int(rng.integers(3, 12)))) < 0.7
-        fp = pack_module._Footprint(blob | (np.arange(blob.shape[1]) == 0), 1, np.eye(3))
-        pos = canvas.resting(fp, 1)
-        if pos:
-            canvas.place(fp, *pos[0])
-    fp = pack_module._Footprint(np.tri(9, 14, 4, dtype=bool)[::-1], 1, np.eye(3))
-    r, c = fp.mask.shape
+    forbid, sky, sky_min, _, _ = _canvas_with_blobs(64, 72, 1, 1, "rest")
+    fp = np.tri(9, 14, 4, dtype=bool)[::-1].copy()
+    r, c = fp.shape
     top = 72 - 1 - r  # highest row inside the top border
     lowest = {}
     for col in range(64 - c + 1):
-        if not canvas.fits(fp, top, col):
+        if not _fits(forbid, fp, top, col):
             continue
         row = top
-        while row > 0 and canvas.fits(fp, row - 1, col):
+        while row > 0 and _fits(forbid, fp, row - 1, col):
             row -= 1
         lowest[col] = row
-    got = canvas.resting(fp, 10**6)
+    bottom = np.where(fp.any(axis=0), np.argmax(fp, axis=0), canvas._EMPTY).astype(np.int64)
+    got, rows, cols = canvas.resting(bottom, c, sky, sky_min, top, 10**4, 16)
     assert got, "the canvas still has room"
-    rows = [row for row, _ in got]
+    rows, cols = rows[:got].tolist(), cols[:got].tolist()
     assert rows == sorted(rows) and rows[0] == min(lowest.values())
-    assert {col: row for row, col in got} == lowest
+    assert dict(zip(cols, rows, strict=True)) == lowest
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_resting_search_bound_gives_the_full_searchs_answer(seed: int) -> None:
-    # the branch-and-bound search must return exactly the `count` best of the full max-plus
-    # correlation, on rough skylines where the sampled bound is loose
+def test_resting_search_pruning_gives_the_full_searchs_answer(seed: int) -> None:
+    # the pruned search (sampled columns first, skyline blocks skipped) must return exactly
+    # the `count` best of the full max-plus correlation, on rough skylines
     rng = np.random.default_rng(seed)
-    canvas = pack_module._Canvas(300, 340, 2)
-    canvas.sky[2:-2] = np.cumsum(rng.integers(-6, 7, 296)).clip(-40, 200) + 60
+    width, height, pad = 300, 340, 2
+    sky = np.full(width, height, dtype=np.int64)
+    sky[2:-2] = np.cumsum(rng.integers(-6, 7, 296)).clip(-40, 200) + 60
+    sky_min = np.empty(-(-width // canvas._SKY_BLOCK), dtype=np.int64)
+    canvas._sky_minima(sky, sky_min, 0, width)
     for _ in range(5):
         mask = np.tri(int(rng.integers(5, 60)), int(rng.integers(20, 200)), 0, dtype=bool)
         mask = mask[:, ::-1] if rng.random() < 0.5 else mask
         mask |= rng.random(mask.shape) < 0.3
-        fp = pack_module._Footprint(mask, 1, np.eye(3))
         rows, cols = mask.shape
+        bottom = np.where(mask.any(axis=0), np.argmax(mask, axis=0), canvas._EMPTY)
         full = np.maximum(
-            (np.lib.stride_tricks.sliding_window_view(canvas.sky, cols) - fp.bottom).max(axis=1),
-            0,
+            (np.lib.stride_tricks.sliding_window_view(sky, cols) - bottom).max(axis=1), 0
         )
-        x = np.flatnonzero(full <= canvas.height - canvas.pad - rows)
+        top = height - pad - rows
+        x = np.flatnonzero(full <= top)
         for count in (1, 2, 7):
             best = x[np.lexsort((x, full[x]))[:count]]
-            assert canvas.resting(fp, count) == [(int(full[j]), int(j)) for j in best]
+            got, r, c = canvas.resting(bottom.astype(np.int64), cols, sky, sky_min, top, count, 16)
+            assert list(zip(r[:got].tolist(), c[:got].tolist(), strict=True)) == [
+                (int(full[j]), int(j)) for j in best
+            ]
+
+
+def test_turned_footprints_and_their_profiles_match_numpy() -> None:
+    # the quarter turns are searched from the base footprint's profiles, never rasterized again
+    rng = np.random.default_rng(4)
+    for _ in range(10):
+        base = rng.random((int(rng.integers(1, 15)), int(rng.integers(1, 15)))) < 0.5
+        base[rng.integers(base.shape[0]), rng.integers(base.shape[1])] = True
+        r, c = base.shape
+        low, high, left, right, cy, cx = canvas._profiles(base, r, c)
+        for k in range(4):
+            want = np.rot90(base, -k)
+            out = np.zeros((max(r, c), max(r, c)), dtype=bool)
+            assert canvas.turned(base, r, c, k, out) == want.shape
+            assert np.array_equal(out[: want.shape[0], : want.shape[1]], want)
+            prof = np.empty(max(r, c), dtype=np.int64)
+            rr, cc, y = canvas._turned_bottom(low, high, left, right, r, c, cy, cx, k, prof)
+            bottom = np.where(want.any(axis=0), np.argmax(want, axis=0), canvas._EMPTY)
+            assert (rr, cc) == want.shape and np.array_equal(prof[:cc], bottom)
+            per_row = want.sum(axis=1)
+            assert np.isclose(y, per_row @ np.arange(len(per_row)) / per_row.sum())
 
 
 def test_a_scale_fits_when_either_rule_fits(monkeypatch) -> None:
@@ -467,7 +537,7 @@ def test_a_scale_fits_when_either_rule_fits(monkeypatch) -> None:
     # the packer keeps whichever layout fits
     uvs, faces, areas = mixed_charts(12, seed=5)
     both = pack_charts(uvs, faces, areas, config=PackConfig(resolution=192))
-    monkeypatch.setitem(pack_module._RULES, "rest", (lambda canvas, fps: None, True))
+    monkeypatch.setattr(pack_module, "_RULE_ORDER", ("holes",))
     alone = pack_charts(uvs, faces, areas, config=PackConfig(resolution=192))
     assert_valid_layout(alone, faces)
     assert_valid_layout(both, faces)

@@ -1,0 +1,649 @@
+"""The raster packer's canvas and its two placement rules, compiled (numba).
+
+`pack.py` tells the story (scale search, chart order, orientations); this module does the texel
+work of one trial: it places every chart at one scale, largest first, each where the centroid
+of its footprint ends up lowest, and reports the height the layout needs. One compiled call per
+trial, so that thousands of small charts cost no Python round trip each.
+
+The canvas is `width` texels wide and `height` tall (taller than the texture during the scale
+search, so that an over-full trial still reports how much height it needed):
+
+``forbid[i, j]``
+    True where a new footprint texel may not go: the border band (left, right, bottom, top) and
+    the placed footprints dilated by the padding.
+``sky[j]``
+    One more than the highest forbidden texel of column j below the top border (the canvas
+    height in the side borders): everything above it is free.
+``coarse``, ``prefix``, ``max_free``
+    ``forbid`` pooled into blocks of ``block x block`` texels ("any"), its row-wise prefix
+    sums (so that a run of cells is tested in O(1)) and each coarse row's longest free run.
+
+Placement rules (``rule``):
+
+``REST`` (0)
+    The chart comes straight down onto the skyline in every orientation it has (fine angles
+    times quarter turns): at column j it rests at ``max_c (sky[j + c] - bottom[c])``. Each
+    angle is rasterized once and its quarter turns are searched from the footprint's profiles.
+    The best `n_starts` resting positions over all orientations are slid down and left.
+``HOLES`` (1)
+    Quarter turns only, but anywhere there is room, also under overhangs and inside other
+    charts' concavities: per coarse column the lowest coarse row where the coarse footprint
+    meets no forbidden cell; the `n_candidates` lowest of those per orientation are slid.
+
+Conventions: grids are indexed ``[row = v, col = u]``; ``np.rot90(mask, -k)`` turns a
+footprint by k counter-clockwise quarter turns of its uv frame (see ``pack._turn``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from segparam.raster import _fill_into, _raster_into, dilate_kernel
+
+REST = 0
+HOLES = 1
+# Empty columns of a footprint's lower profile: far below anything.
+_EMPTY = 1 << 30
+# Columns per block of the skyline's block minima, which let the resting search skip a block of
+# positions at once (16: 64 blocks at 1024 texels).
+_SKY_BLOCK = 16
+
+
+@njit(cache=True, nogil=True)
+def _sky_minima(sky, sky_min, c0, c1):  # pragma: no cover - compiled
+    """Refresh the minima of the skyline blocks that hold columns c0 .. c1 - 1."""
+    for k in range(max(c0, 0) // _SKY_BLOCK, min((c1 - 1) // _SKY_BLOCK + 1, len(sky_min))):
+        m = sky[k * _SKY_BLOCK]
+        for j in range(k * _SKY_BLOCK, min((k + 1) * _SKY_BLOCK, len(sky))):
+            m = min(m, sky[j])
+        sky_min[k] = m
+
+
+@njit(cache=True, nogil=True)
+def _before(a0, a1, a2, a3, b0, b1, b2, b3):  # pragma: no cover - compiled
+    """Lexicographic (a0, a1, a2, a3) < (b0, b1, b2, b3)."""
+    if a0 != b0:
+        return a0 < b0
+    if a1 != b1:
+        return a1 < b1
+    if a2 != b2:
+        return a2 < b2
+    return a3 < b3
+
+
+# ----------------------------------------------------------------------------------------------
+# footprints
+
+
+@njit(cache=True, nogil=True)
+def turned(base, rows, cols, k, out):  # pragma: no cover - compiled
+    """``np.rot90(base[:rows, :cols], -k)`` written into `out`; returns its shape."""
+    if k == 0:
+        for i in range(rows):
+            for j in range(cols):
+                out[i, j] = base[i, j]
+        return rows, cols
+    if k == 1:
+        for i in range(cols):
+            for j in range(rows):
+                out[i, j] = base[rows - 1 - j, i]
+        return cols, rows
+    if k == 2:
+        for i in range(rows):
+            for j in range(cols):
+                out[i, j] = base[rows - 1 - i, cols - 1 - j]
+        return rows, cols
+    for i in range(cols):
+        for j in range(rows):
+            out[i, j] = base[j, cols - 1 - i]
+    return cols, rows
+
+
+@njit(cache=True, nogil=True)
+def _profiles(base, rows, cols):  # pragma: no cover - compiled
+    """One pass over a footprint: per column its lowest and highest row, per row its left-most
+    and right-most column (`_EMPTY` / -1 where empty), and its centroid (row, col)."""
+    low = np.full(cols, _EMPTY, dtype=np.int64)
+    high = np.full(cols, -1, dtype=np.int64)
+    left = np.full(rows, _EMPTY, dtype=np.int64)
+    right = np.full(rows, -1, dtype=np.int64)
+    total = 0
+    sum_r = 0
+    sum_c = 0
+    for i in range(rows):
+        n = 0
+        for j in range(cols):
+            if base[i, j]:
+                n += 1
+                sum_c += j
+                if low[j] == _EMPTY:
+                    low[j] = i
+                high[j] = i
+                if left[i] == _EMPTY:
+                    left[i] = j
+                right[i] = j
+        total += n
+        sum_r += i * n
+    total = max(total, 1)
+    return low, high, left, right, sum_r / total, sum_c / total
+
+
+@njit(cache=True, nogil=True)
+def _turned_bottom(low, high, left, right, rows, cols, cy, cx, k, out):  # pragma: no cover
+    """Lowest row per column and centroid row of ``np.rot90(base, -k)``, from base's profiles.
+
+    ``rot90(base, -1)[i, j] = base[rows - 1 - j, i]`` (shape (cols, rows)), ``-2``:
+    ``base[rows - 1 - i, cols - 1 - j]``, ``-3``: ``base[j, cols - 1 - i]``. Writes the profile
+    into `out` and returns (rows, cols, centroid row) of the turned footprint.
+    """
+    if k == 0:
+        for j in range(cols):
+            out[j] = low[j]
+        return rows, cols, cy
+    if k == 1:
+        for j in range(rows):
+            out[j] = left[rows - 1 - j]
+        return cols, rows, cx
+    if k == 2:
+        for j in range(cols):
+            h = high[cols - 1 - j]
+            out[j] = _EMPTY if h < 0 else rows - 1 - h
+        return rows, cols, (rows - 1) - cy
+    for j in range(rows):
+        r = right[j]
+        out[j] = _EMPTY if r < 0 else cols - 1 - r
+    return cols, rows, (cols - 1) - cx
+
+
+@njit(cache=True, nogil=True)
+def _same_turns(base, rows, cols, k1, k2):  # pragma: no cover - compiled
+    """Whether two quarter turns of `base` are the same footprint (shapes already equal)."""
+    side = max(rows, cols)
+    one = np.zeros((side, side), dtype=np.bool_)
+    two = np.zeros((side, side), dtype=np.bool_)
+    r, c = turned(base, rows, cols, k1, one)
+    turned(base, rows, cols, k2, two)
+    for i in range(r):
+        for j in range(c):
+            if one[i, j] != two[i, j]:
+                return False
+    return True
+
+
+# ----------------------------------------------------------------------------------------------
+# the canvas
+
+
+@njit(cache=True, nogil=True)
+def new_canvas(width, height, pad, block):  # pragma: no cover - compiled
+    """Empty canvas arrays: (forbid, sky, coarse, prefix, max_free); see the module docstring."""
+    forbid = np.ones((height, width), dtype=np.bool_)
+    for i in range(pad, height - pad):
+        for j in range(pad, width - pad):
+            forbid[i, j] = False
+    sky = np.full(width, pad, dtype=np.int64)
+    for j in range(pad):
+        sky[j] = height
+        sky[width - 1 - j] = height
+    nr = (height + block - 1) // block
+    nc = (width + block - 1) // block
+    coarse = np.zeros((nr, nc), dtype=np.bool_)
+    prefix = np.zeros((nr, nc + 1), dtype=np.int32)
+    max_free = np.zeros(nr, dtype=np.int64)
+    _pool_rows(forbid, block, coarse, prefix, max_free, 0, nr, 0, nc)
+    return forbid, sky, coarse, prefix, max_free
+
+
+@njit(cache=True, nogil=True)
+def _pool_rows(forbid, block, coarse, prefix, max_free, r0, r1, c0, c1):  # pragma: no cover
+    """Recompute coarse cells [r0, r1) x [c0, c1) from `forbid` (texels past its edge count as
+    forbidden), and the prefix sums and longest free runs of those rows."""
+    height, width = forbid.shape
+    nc = coarse.shape[1]
+    for R in range(r0, r1):
+        for C in range(c0, c1):
+            hit = False
+            for i in range(R * block, (R + 1) * block):
+                for j in range(C * block, (C + 1) * block):
+                    if i >= height or j >= width or forbid[i, j]:
+                        hit = True
+                        break
+                if hit:
+                    break
+            coarse[R, C] = hit
+        run = 0
+        best = 0
+        for C in range(nc):
+            prefix[R, C + 1] = prefix[R, C] + (1 if coarse[R, C] else 0)
+            run = 0 if coarse[R, C] else run + 1
+            best = max(best, run)
+        max_free[R] = best
+
+
+@njit(cache=True, nogil=True)
+def fits(forbid, height, width, mask, rows, cols, row, col):  # pragma: no cover - compiled
+    """Whether the footprint ``mask[:rows, :cols]`` fits with its corner at (row, col)."""
+    if row < 0 or col < 0 or row + rows > height or col + cols > width:
+        return False
+    for i in range(rows):
+        for j in range(cols):
+            if mask[i, j] and forbid[row + i, col + j]:
+                return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def slide(forbid, mask, rows, cols, row, col, max_steps):  # pragma: no cover - compiled
+    """Move a fitting footprint down, then left, one texel at a time while it fits.
+
+    Only the texels a move newly covers are tested: the footprint's lower (left) edges.
+    """
+    n_down = 0
+    n_left = 0
+    for i in range(rows):
+        for j in range(cols):
+            if mask[i, j]:
+                if i == 0 or not mask[i - 1, j]:
+                    n_down += 1
+                if j == 0 or not mask[i, j - 1]:
+                    n_left += 1
+    down = np.empty((n_down, 2), dtype=np.int64)
+    left = np.empty((n_left, 2), dtype=np.int64)
+    n_down = 0
+    n_left = 0
+    for i in range(rows):
+        for j in range(cols):
+            if mask[i, j]:
+                if i == 0 or not mask[i - 1, j]:
+                    down[n_down, 0] = i
+                    down[n_down, 1] = j
+                    n_down += 1
+                if j == 0 or not mask[i, j - 1]:
+                    left[n_left, 0] = i
+                    left[n_left, 1] = j
+                    n_left += 1
+    steps = 0
+    moved = True
+    while moved and steps < max_steps:
+        moved = False
+        while row > 0:
+            blocked = False
+            for t in range(n_down):
+                if forbid[row - 1 + down[t, 0], col + down[t, 1]]:
+                    blocked = True
+                    break
+            if blocked:
+                break
+            row -= 1
+            steps += 1
+            moved = True
+        while col > 0:
+            blocked = False
+            for t in range(n_left):
+                if forbid[row + left[t, 0], col - 1 + left[t, 1]]:
+                    blocked = True
+                    break
+            if blocked:
+                break
+            col -= 1
+            steps += 1
+            moved = True
+    return row, col
+
+
+@njit(cache=True, nogil=True)
+def place(
+    forbid, sky, coarse, prefix, max_free, block, mask, rows, cols, row, col, pad
+):  # pragma: no cover - compiled
+    """Forbid the footprint dilated by `pad`, raise the skyline to its top, refresh the pool."""
+    grown = dilate_kernel(mask[:rows, :cols], pad)
+    r0, c0 = row - pad, col - pad
+    H, W = forbid.shape
+    for i in range(grown.shape[0]):
+        ri = r0 + i
+        if ri < 0 or ri >= H:
+            continue
+        for j in range(grown.shape[1]):
+            cj = c0 + j
+            if 0 <= cj < W and grown[i, j]:
+                forbid[ri, cj] = True
+    for j in range(grown.shape[1]):
+        cj = c0 + j
+        if cj < 0 or cj >= sky.shape[0]:
+            continue
+        for i in range(grown.shape[0] - 1, -1, -1):
+            if grown[i, j]:
+                if r0 + i + 1 > sky[cj]:
+                    sky[cj] = r0 + i + 1
+                break
+    R0 = max(r0, 0) // block
+    R1 = min((min(r0 + grown.shape[0], H) + block - 1) // block, coarse.shape[0])
+    C0 = max(c0, 0) // block
+    C1 = min((min(c0 + grown.shape[1], W) + block - 1) // block, coarse.shape[1])
+    _pool_rows(forbid, block, coarse, prefix, max_free, R0, R1, C0, C1)
+
+
+# ----------------------------------------------------------------------------------------------
+# the two searches
+
+
+@njit(cache=True, nogil=True)
+def resting(bottom, cols, sky, sky_min, top, count, samples):  # pragma: no cover - compiled
+    """The `count` lowest (then left-most) positions where the footprint rests on the skyline.
+
+    At column j the footprint's lowest texels must clear the skyline of every column it covers:
+    ``row(j) = max_c (sky[j + c] - bottom[c])``, at least 0 and at most `top`. Columns are
+    scanned left to right; a position is dropped as soon as one of its terms already exceeds
+    the `count`-th best row kept, testing about `samples` spread columns (the footprint's lowest
+    one first) before the rest, so most positions cost a few comparisons; a run of
+    `_SKY_BLOCK` positions is dropped at once when the skyline's minimum (`sky_min`, per block
+    of `_SKY_BLOCK` columns) under the footprint's lowest column is already too high. The
+    result is the exact `count` best. `bottom` holds the footprint's lowest row per column
+    (`_EMPTY` for an empty column). Returns (found, rows, cols).
+    """
+    width = sky.shape[0]
+    out_r = np.empty(count, dtype=np.int64)
+    out_c = np.empty(count, dtype=np.int64)
+    if cols > width:
+        return 0, out_r, out_c
+    lowest_col = 0
+    for c in range(cols):
+        if bottom[c] < bottom[lowest_col]:
+            lowest_col = c
+    step = max(1, cols // samples)
+    probe = np.empty(cols // step + 2, dtype=np.int64)
+    probe[0] = lowest_col
+    n_probe = 1
+    for c in range(0, cols, step):
+        probe[n_probe] = c
+        n_probe += 1
+    found = 0
+    n_pos = width - cols + 1
+    j = -1
+    while j + 1 < n_pos:
+        j += 1
+        # a kept position must come lower than the worst kept (equal rows: left-most wins)
+        limit = top if found < count else out_r[count - 1] - 1
+        if j % _SKY_BLOCK == 0:  # positions j .. j + B - 1 see columns of blocks k and k + 1
+            k = (j + lowest_col) // _SKY_BLOCK
+            low = sky_min[k] if k + 1 == len(sky_min) else min(sky_min[k], sky_min[k + 1])
+            if low - bottom[lowest_col] > limit:
+                j += _SKY_BLOCK - 1
+                continue
+        lift = 0
+        for t in range(n_probe):
+            v = sky[j + probe[t]] - bottom[probe[t]]
+            if v > lift:
+                lift = v
+                if lift > limit:
+                    break
+        if lift > limit:
+            continue
+        for c in range(cols):
+            v = sky[j + c] - bottom[c]
+            if v > lift:
+                lift = v
+                if lift > limit:
+                    break
+        if lift > limit:
+            continue
+        pos = found
+        while pos > 0 and lift < out_r[pos - 1]:
+            pos -= 1
+        for q in range(min(found, count - 1), pos, -1):
+            out_r[q] = out_r[q - 1]
+            out_c[q] = out_c[q - 1]
+        out_r[pos] = lift
+        out_c[pos] = j
+        found = min(found + 1, count)
+    return found, out_r, out_c
+
+
+@njit(cache=True, nogil=True)
+def coarse_runs(mask, rows, cols, block):  # pragma: no cover - compiled
+    """The coarse footprint's runs of cells, as (row, first col, last col), widest first."""
+    cr = (rows + block - 1) // block
+    cc = (cols + block - 1) // block
+    cm = np.zeros((cr, cc), dtype=np.bool_)
+    for i in range(rows):
+        for j in range(cols):
+            if mask[i, j]:
+                cm[i // block, j // block] = True
+    runs = np.empty((cr * ((cc + 1) // 2), 3), dtype=np.int64)
+    n = 0
+    widest = 0
+    for i in range(cr):
+        j = 0
+        while j < cc:
+            if cm[i, j]:
+                start = j
+                while j < cc and cm[i, j]:
+                    j += 1
+                runs[n, 0] = i
+                runs[n, 1] = start
+                runs[n, 2] = j - 1
+                if j - start > runs[widest, 2] - runs[widest, 1] + 1:
+                    widest = n
+                n += 1
+            else:
+                j += 1
+    runs = runs[:n].copy()
+    if n:  # widest first: it is the run most likely to collide, so tests fail early
+        first = runs[0].copy()
+        runs[0] = runs[widest]
+        runs[widest] = first
+    return runs, cr, cc
+
+
+@njit(cache=True, nogil=True)
+def holes(prefix, max_free, runs, cr, cc, count):  # pragma: no cover - compiled
+    """Per coarse column the lowest coarse row where the coarse footprint meets no forbidden
+    cell; of those, the `count` lowest (then left-most). Returns (found, rows, cols).
+
+    These are the first `count` fitting positions in row-major order (a column's first fit
+    is its lowest), so rows are scanned upwards and the scan stops at the `count`-th fit.
+    Rows whose longest free run is shorter than the footprint's widest run are skipped; a
+    position is tested run by run (widest first) with the row prefix sums.
+    """
+    nr = prefix.shape[0]
+    nc = prefix.shape[1] - 1
+    out_r = np.empty(count, dtype=np.int64)
+    out_c = np.empty(count, dtype=np.int64)
+    if cr > nr or cc > nc or len(runs) == 0:
+        return 0, out_r, out_c
+    iw, w0, w1 = runs[0, 0], runs[0, 1], runs[0, 2]
+    ww = w1 - w0 + 1
+    taken = np.zeros(nc, dtype=np.bool_)
+    found = 0
+    for y in range(nr - cr + 1):
+        if max_free[y + iw] < ww:
+            continue
+        R = y + iw
+        for j in range(nc - cc + 1):
+            if taken[j] or prefix[R, j + w1 + 1] != prefix[R, j + w0]:
+                continue
+            ok = True
+            for u in range(1, len(runs)):
+                Ru = y + runs[u, 0]
+                if prefix[Ru, j + runs[u, 2] + 1] != prefix[Ru, j + runs[u, 1]]:
+                    ok = False
+                    break
+            if ok:
+                taken[j] = True
+                out_r[found] = y
+                out_c[found] = j
+                found += 1
+                if found == count:
+                    return found, out_r, out_c
+    return found, out_r, out_c
+
+
+# ----------------------------------------------------------------------------------------------
+# one trial
+
+
+@njit(cache=True, nogil=True)
+def trial(
+    Q, q_ptr, ext, elems, el_ptr, fill, entry_ptr, order, s, width, height, pad, turns, rule,
+    block, margin, eps, per_orientation, n_starts, n_candidates, samples, slide_steps,
+):  # pragma: no cover - compiled
+    """Place every chart, in `order`, at scale s by one placement rule.
+
+    Charts have entries ``entry_ptr[i] .. entry_ptr[i + 1]``, one per angle (the "holes" rule
+    uses the first only): points ``Q[q_ptr[e]:q_ptr[e + 1]]`` (the chart turned by the angle,
+    minimum corner at the origin, 3-D units) with extent ``ext[e]``; elements
+    ``elems[el_ptr[i]:el_ptr[i + 1]]``, boundary edges when ``fill[i]`` (outline fill) else
+    triangles. A footprint box is ``floor(extent * s + 2 margin) + 1`` texels, the chart
+    centred in it. Returns (placed, result, need): how many charts were placed in order; per
+    chart (angle entry, quarter turns, row, col, footprint rows, footprint cols); the texture
+    side the layout needs (top-most footprint row + 1 + pad).
+    """
+    forbid, sky, coarse, prefix, max_free = new_canvas(width, height, pad, block)
+    sky_min = np.empty((width + _SKY_BLOCK - 1) // _SKY_BLOCK, dtype=np.int64)
+    _sky_minima(sky, sky_min, 0, width)
+    result = np.full((len(entry_ptr) - 1, 6), -1, dtype=np.int64)
+    need = 0
+    for t in range(len(order)):
+        i = order[t]
+        e0 = entry_ptr[i]
+        e1 = entry_ptr[i + 1] if rule == REST else e0 + 1
+        El = elems[el_ptr[i] : el_ptr[i + 1]]
+        side = 1
+        for e in range(e0, e1):
+            side = max(side, int(np.floor(ext[e, 0] * s + 2 * margin)) + 1)
+            side = max(side, int(np.floor(ext[e, 1] * s + 2 * margin)) + 1)
+        n_or = (e1 - e0) * turns
+        bases = np.zeros((e1 - e0, side, side), dtype=np.bool_)
+        base_shape = np.zeros((e1 - e0, 2), dtype=np.int64)
+        bottoms = np.empty((n_or, side), dtype=np.int64)
+        shape = np.zeros((n_or, 2), dtype=np.int64)
+        cy = np.zeros(n_or)
+        ident = np.zeros((n_or, 2), dtype=np.int64)  # (angle entry, quarter turns)
+        n_kept = 0
+        for e in range(e0, e1):
+            a = e - e0
+            n0 = int(np.floor(ext[e, 0] * s + 2 * margin)) + 1
+            n1 = int(np.floor(ext[e, 1] * s + 2 * margin)) + 1
+            off0 = (n0 - ext[e, 0] * s) / 2
+            off1 = (n1 - ext[e, 1] * s) / 2
+            P = np.empty((q_ptr[e + 1] - q_ptr[e], 2))
+            for v in range(P.shape[0]):
+                P[v, 0] = Q[q_ptr[e] + v, 0] * s + off0
+                P[v, 1] = Q[q_ptr[e] + v, 1] * s + off1
+            base = bases[a, :n1, :n0]
+            if fill[i]:
+                _fill_into(P, El, eps, base)
+            else:
+                _raster_into(P, El, eps, base)
+            base_shape[a, 0] = n1
+            base_shape[a, 1] = n0
+            low, high, left, right, cy0, cx0 = _profiles(base, n1, n0)
+            first = n_kept
+            for k in range(turns):
+                r, c, y = _turned_bottom(low, high, left, right, n1, n0, cy0, cx0, k, bottoms[n_kept])
+                duplicate = False
+                for o in range(first, n_kept):  # a symmetric footprint: keep the first turn
+                    if shape[o, 0] == r and shape[o, 1] == c and cy[o] == y:
+                        if np.array_equal(bottoms[o, :c], bottoms[n_kept, :c]):
+                            if _same_turns(base, n1, n0, ident[o, 1], k):
+                                duplicate = True
+                                break
+                if duplicate:
+                    continue
+                shape[n_kept, 0] = r
+                shape[n_kept, 1] = c
+                cy[n_kept] = y
+                ident[n_kept, 0] = a
+                ident[n_kept, 1] = k
+                n_kept += 1
+        # turned masks are written out only for the orientations that are tried
+        n_slots = min(n_kept, n_starts) if rule == REST else n_kept
+        masks = np.zeros((n_slots, side, side), dtype=np.bool_)
+        slot = np.full(n_kept, -1, dtype=np.int64)
+        used = 0
+        # starting points (orientation, row, col), in the order they are tried
+        if rule == REST:
+            # the best over all orientations, by (centroid row, col, orientation, row)
+            s_key = np.full(n_starts, np.inf)
+            s_col = np.zeros(n_starts, dtype=np.int64)
+            s_or = np.zeros(n_starts, dtype=np.int64)
+            s_row = np.zeros(n_starts, dtype=np.int64)
+            n_s = 0
+            for o in range(n_kept):
+                r, c = shape[o, 0], shape[o, 1]
+                got, rr, cc = resting(
+                    bottoms[o], c, sky, sky_min, height - pad - r, per_orientation, samples
+                )
+                for g in range(got):
+                    key = rr[g] + cy[o]
+                    pos = n_s
+                    while pos > 0 and _before(
+                        key, cc[g], o, rr[g],
+                        s_key[pos - 1], s_col[pos - 1], s_or[pos - 1], s_row[pos - 1],
+                    ):
+                        pos -= 1
+                    if pos >= n_starts:
+                        continue
+                    for q in range(min(n_s, n_starts - 1), pos, -1):
+                        s_key[q] = s_key[q - 1]
+                        s_col[q] = s_col[q - 1]
+                        s_or[q] = s_or[q - 1]
+                        s_row[q] = s_row[q - 1]
+                    s_key[pos] = key
+                    s_col[pos] = cc[g]
+                    s_or[pos] = o
+                    s_row[pos] = rr[g]
+                    n_s = min(n_s + 1, n_starts)
+        else:
+            s_or = np.zeros(n_kept * n_candidates, dtype=np.int64)
+            s_row = np.zeros(n_kept * n_candidates, dtype=np.int64)
+            s_col = np.zeros(n_kept * n_candidates, dtype=np.int64)
+            n_s = 0
+            for o in range(n_kept):
+                a = ident[o, 0]
+                turned(bases[a], base_shape[a, 0], base_shape[a, 1], ident[o, 1], masks[o])
+                slot[o] = o
+                runs, cr, cc = coarse_runs(masks[o], shape[o, 0], shape[o, 1], block)
+                got, rr, cols = holes(prefix, max_free, runs, cr, cc, n_candidates)
+                for g in range(got):
+                    s_or[n_s] = o
+                    s_row[n_s] = rr[g] * block
+                    s_col[n_s] = cols[g] * block
+                    n_s += 1
+        # slide each start down and left; the lowest centroid wins
+        best_o = -1
+        best_key = np.inf
+        best_col = 0
+        best_row = 0
+        for g in range(n_s):
+            o, row, col = s_or[g], s_row[g], s_col[g]
+            if slot[o] < 0:
+                a = ident[o, 0]
+                turned(bases[a], base_shape[a, 0], base_shape[a, 1], ident[o, 1], masks[used])
+                slot[o] = used
+                used += 1
+            mask = masks[slot[o]]
+            r, c = shape[o, 0], shape[o, 1]
+            if not fits(forbid, height, width, mask, r, c, row, col):
+                continue
+            row, col = slide(forbid, mask, r, c, row, col, slide_steps)
+            key = row + cy[o]
+            if best_o < 0 or _before(key, col, o, 0, best_key, best_col, best_o, 0):
+                best_o, best_key, best_col, best_row = o, key, col, row
+        if best_o < 0:
+            return t, result, need
+        r, c = shape[best_o, 0], shape[best_o, 1]
+        place(
+            forbid, sky, coarse, prefix, max_free, block, masks[slot[best_o]], r, c, best_row,
+            best_col, pad,
+        )
+        _sky_minima(sky, sky_min, best_col - pad, best_col + c + pad)
+        result[i, 0] = ident[best_o, 0]
+        result[i, 1] = ident[best_o, 1]
+        result[i, 2] = best_row
+        result[i, 3] = best_col
+        result[i, 4] = r
+        result[i, 5] = c
+        need = max(need, best_row + r + pad)
+    return len(order), result, need

@@ -1,0 +1,279 @@
+"""Conservative rasterization of uv triangles on a texel grid (used by pack, export and tests).
+
+A triangle *touches* a texel when the closed triangle and the closed texel square intersect,
+widened by a tolerance `eps` (texels). The kernels are compiled with numba (``cache=True``: the
+machine code is kept beside this file after the first run), because the packer rasterizes every
+chart in up to 24 orientations for every scale it tries, and the per-row work of a triangle is
+a few comparisons that numpy could only batch at the price of large temporary arrays.
+
+Conventions: a texel ``(i, j)`` of a ``resolution x resolution`` texture covers
+``[j, j + 1] x [i, i + 1] / resolution`` in uv, i.e. grids are indexed ``[row = v, col = u]``
+with row 0 at v = 0.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "CHECK_EPS",
+    "boundary_edges",
+    "dilate",
+    "fill_outline",
+    "footprint_conflicts",
+    "rasterize_footprint",
+    "rasterize_triangles",
+]
+
+# Tolerance (texels) of the public rasterizer: anything within it of a texel touches the texel.
+CHECK_EPS = 1e-7
+
+
+@njit(cache=True, nogil=True)
+def _raster_into(P, F, eps, mask):  # pragma: no cover - compiled
+    """OR the texels touched by triangles ``P[F]`` (texel coordinates) into `mask`.
+
+    Exact for closed sets, row by row: the part of a triangle inside the slab of texel row i
+    (``i <= y <= i + 1``) is convex, so it touches the texels of that row that its x-range
+    meets; that x-range comes from the vertices inside the slab and the edges' crossings of the
+    slab's two lines. Degenerate triangles keep their segments.
+    """
+    rows, cols = mask.shape
+    for t in range(F.shape[0]):
+        a, b, c = F[t, 0], F[t, 1], F[t, 2]
+        ymin = min(P[a, 1], P[b, 1], P[c, 1])
+        ymax = max(P[a, 1], P[b, 1], P[c, 1])
+        lo = max(int(np.floor(ymin - eps)), 0)
+        hi = min(int(np.floor(ymax + eps)), rows - 1)
+        for row in range(lo, hi + 1):
+            y0 = row - eps
+            y1 = row + 1 + eps
+            xmin = np.inf
+            xmax = -np.inf
+            for v in range(3):
+                iv = F[t, v]
+                iw = F[t, (v + 1) % 3]
+                xv, yv = P[iv, 0], P[iv, 1]
+                xw, yw = P[iw, 0], P[iw, 1]
+                if yv >= y0 and yv <= y1:
+                    xmin = min(xmin, xv)
+                    xmax = max(xmax, xv)
+                dy = yw - yv
+                if dy != 0:
+                    slope = (xw - xv) / dy
+                    ylow, yhigh = min(yv, yw), max(yv, yw)
+                    for line in (y0, y1):
+                        if line >= ylow and line <= yhigh:
+                            x = xv + (line - yv) * slope
+                            xmin = min(xmin, x)
+                            xmax = max(xmax, x)
+            if xmin <= xmax:
+                x0 = max(int(np.floor(xmin - eps)), 0)
+                x1 = min(int(np.floor(xmax + eps)), cols - 1)
+                for x in range(x0, x1 + 1):
+                    mask[row, x] = True
+
+
+@njit(cache=True, nogil=True)
+def _fill_into(P, B, eps, mask):  # pragma: no cover - compiled
+    """OR the texels of the union of counter-clockwise triangles, from its outline B, into mask.
+
+    A texel touches the union when it touches a boundary edge, or else when its centre lies
+    inside, where the winding number of the outline is positive. Edges are rasterized as
+    degenerate triangles; winding numbers are summed along rows from the edges' crossings of
+    the texel-centre lines. The work is proportional to the outline plus the box, not to the
+    triangle count.
+    """
+    rows, cols = mask.shape
+    E = np.empty((B.shape[0], 3), dtype=np.int64)
+    for e in range(B.shape[0]):
+        E[e, 0] = B[e, 0]
+        E[e, 1] = B[e, 1]
+        E[e, 2] = B[e, 1]
+    _raster_into(P, E, eps, mask)
+    diff = np.zeros((rows, cols + 1), dtype=np.int32)
+    for e in range(B.shape[0]):
+        xa, ya = P[B[e, 0], 0], P[B[e, 0], 1]
+        xb, yb = P[B[e, 1], 0], P[B[e, 1], 1]
+        # the edge crosses the centre lines y = i + 1/2 with min(ya, yb) <= y < max(ya, yb)
+        lo = max(int(np.ceil(min(ya, yb) - 0.5)), 0)
+        hi = min(int(np.ceil(max(ya, yb) - 0.5)) - 1, rows - 1)
+        # counter-clockwise: the outline goes down on the left side of the inside, up on the right
+        step = 1 if yb < ya else -1
+        for row in range(lo, hi + 1):
+            t = (row + 0.5 - ya) / (yb - ya)
+            x = xa + t * (xb - xa)
+            first = min(max(int(np.ceil(x - 0.5)), 0), cols)  # first centre right of x
+            diff[row, first] += step
+    for row in range(rows):
+        w = 0
+        for col in range(cols):
+            w += diff[row, col]
+            if w > 0:
+                mask[row, col] = True
+
+
+def rasterize_triangles(P: np.ndarray, F: np.ndarray, shape: tuple[int, int], eps: float):
+    """Texels of a ``shape = (rows, cols)`` grid touched by triangles with texel coordinates P."""
+    mask = np.zeros(shape, dtype=np.bool_)
+    if len(F):
+        _raster_into(
+            np.ascontiguousarray(P, dtype=np.float64), np.ascontiguousarray(F, np.int64), eps, mask
+        )
+    return mask
+
+
+def fill_outline(P: np.ndarray, B: np.ndarray, shape: tuple[int, int], eps: float) -> np.ndarray:
+    """The texels `rasterize_triangles` gives for a chart, from its boundary edges B alone.
+
+    B comes from :func:`boundary_edges` of counter-clockwise triangles; texel for texel the
+    same mask as rasterizing every triangle.
+    """
+    mask = np.zeros(shape, dtype=np.bool_)
+    _fill_into(
+        np.ascontiguousarray(P, dtype=np.float64), np.ascontiguousarray(B, np.int64), eps, mask
+    )
+    return mask
+
+
+def boundary_edges(F: np.ndarray) -> np.ndarray | None:
+    """Directed boundary edges of counter-clockwise triangles, or None if a fill can't use them.
+
+    The outline fill needs every interior edge to be used once in each direction (then the
+    two triangles of an interior edge lie on its two sides, and the union's outline is made of
+    boundary edges only). Returns None when a directed edge repeats or an edge has more than
+    two triangles.
+    """
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    n = int(F.max()) + 1
+    directed = E[:, 0] * n + E[:, 1]
+    if len(np.unique(directed)) != len(directed):
+        return None
+    undirected = np.minimum(E[:, 0], E[:, 1]) * n + np.maximum(E[:, 0], E[:, 1])
+    _, inverse, counts = np.unique(undirected, return_inverse=True, return_counts=True)
+    if counts.max() > 2:
+        return None
+    return E[counts[inverse.ravel()] == 1]
+
+
+@njit(cache=True, nogil=True)
+def dilate_kernel(mask, radius):  # pragma: no cover - compiled
+    """Square (Chebyshev) dilation by `radius`; the result grows by radius on every side."""
+    rows, cols = mask.shape
+    wide = np.zeros((rows, cols + 2 * radius), dtype=np.bool_)
+    for i in range(rows):
+        for j in range(cols):
+            if mask[i, j]:
+                for d in range(2 * radius + 1):
+                    wide[i, j + d] = True
+    out = np.zeros((rows + 2 * radius, cols + 2 * radius), dtype=np.bool_)
+    for i in range(rows):
+        for j in range(cols + 2 * radius):
+            if wide[i, j]:
+                for d in range(2 * radius + 1):
+                    out[i + d, j] = True
+    return out
+
+
+def dilate(mask: np.ndarray, radius: int) -> np.ndarray:
+    """Square (Chebyshev) dilation by `radius` texels; the result grows by radius per side."""
+    return dilate_kernel(np.ascontiguousarray(mask, dtype=np.bool_), int(radius))
+
+
+def rasterize_footprint(
+    uv: np.ndarray, F: np.ndarray, *, resolution: int, eps: float = CHECK_EPS
+) -> np.ndarray:
+    """Conservative footprint of one chart on a ``resolution x resolution`` texture.
+
+    Parameters
+    ----------
+    uv : (n, 2) float ndarray
+        Chart coordinates in the unit square (parts outside are clipped).
+    F : (m, 3) int ndarray
+        Triangles, indices into `uv`.
+    resolution : int
+        Texels per side.
+    eps : float
+        Tolerance in texels: a texel closer than `eps` to a triangle counts as touched.
+
+    Returns
+    -------
+    mask : (resolution, resolution) bool ndarray
+        ``mask[i, j]`` is True when a triangle touches texel ``[j, j+1] x [i, i+1] /
+        resolution`` (row index along v).
+    """
+    uv = np.asarray(uv, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
+    return rasterize_triangles(uv * resolution, F, (resolution, resolution), eps)
+
+
+def footprint_conflicts(
+    uvs: Sequence[np.ndarray],
+    faces: Sequence[np.ndarray],
+    *,
+    resolution: int,
+    padding: int = 0,
+) -> int:
+    """Count the texels that break the padding rule of a packed atlas.
+
+    A footprint texel of a chart is counted when it lies within `padding` texels (Chebyshev
+    distance) of another chart's footprint or of the texture's border, or outside the texture.
+    With ``padding=0`` this counts texels shared by two charts: a positive count proves that the
+    conservative footprints overlap.
+
+    Parameters
+    ----------
+    uvs : sequence of (n_i, 2) float ndarray
+        Chart coordinates, meant to lie in the unit square.
+    faces : sequence of (m_i, 3) int ndarray
+        Chart triangles.
+    resolution : int
+        Texels per side.
+    padding : int
+        Empty texels required between charts and to the border.
+
+    Returns
+    -------
+    int
+        Number of offending (chart, texel) pairs; 0 for a valid layout.
+    """
+    G, p = int(resolution), int(padding)
+    # a canvas with a margin, so that footprints past the border are still seen
+    m = p + 2
+    size = G + 2 * m
+    count = np.zeros((size, size), dtype=np.int32)
+    windows = []
+    bad = 0
+    for uv, F in zip(uvs, faces, strict=True):  # loop over charts
+        P = np.asarray(uv, dtype=np.float64) * G
+        F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
+        outside = (P < 2 - m) | (P > G + m - 2)
+        if np.any(outside):  # far outside the texture: count every vertex, skip the raster
+            bad += int(np.count_nonzero(outside.any(axis=1)))
+            windows.append(None)
+            continue
+        lo = np.floor(P.min(axis=0)).astype(np.int64) - 1
+        hi = np.floor(P.max(axis=0)).astype(np.int64) + 2
+        shape = (int(hi[1] - lo[1]), int(hi[0] - lo[0]))
+        mask = rasterize_triangles(P - lo, F, shape, CHECK_EPS)
+        grown = dilate(mask, p)
+        r0, c0 = int(lo[1]) + m - p, int(lo[0]) + m - p
+        r0c, c0c = max(r0, 0), max(c0, 0)
+        r1c, c1c = min(r0 + grown.shape[0], size), min(c0 + grown.shape[1], size)
+        count[r0c:r1c, c0c:c1c] += grown[r0c - r0 : r1c - r0, c0c - c0 : c1c - c0]
+        windows.append((mask, grown, r0, c0))
+    allowed = np.zeros((size, size), dtype=bool)
+    allowed[m + p : m + G - p, m + p : m + G - p] = True
+    for w in windows:
+        if w is None:
+            continue
+        mask, grown, r0, c0 = w
+        rows, cols = mask.shape
+        r, c = r0 + p, c0 + p  # the mask's own window, inside the canvas by the margin test
+        others = count[r : r + rows, c : c + cols] - grown[p : p + rows, p : p + cols]
+        inside = allowed[r : r + rows, c : c + cols]
+        bad += int(np.count_nonzero(mask & ((others > 0) | ~inside)))
+    return bad
