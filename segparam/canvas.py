@@ -487,6 +487,7 @@ def holes(prefix, max_free, runs, cr, cc, count):  # pragma: no cover - compiled
 def trial(
     Q, q_ptr, ext, elems, el_ptr, fill, entry_ptr, order, s, width, height, pad, turns, rule,
     block, margin, eps, per_orientation, n_starts, n_candidates, samples, slide_steps,
+    min_turning_side,
 ):  # pragma: no cover - compiled
     """Place every chart, in `order`, at scale s by one placement rule.
 
@@ -508,6 +509,9 @@ def trial(
         i = order[t]
         e0 = entry_ptr[i]
         e1 = entry_ptr[i + 1] if rule == REST else e0 + 1
+        # a footprint this small turns by quarter turns only: finer angles change few texels
+        if max(ext[e0, 0], ext[e0, 1]) * s < min_turning_side:
+            e1 = e0 + 1
         El = elems[el_ptr[i] : el_ptr[i + 1]]
         side = 1
         for e in range(e0, e1):
@@ -541,7 +545,9 @@ def trial(
             low, high, left, right, cy0, cx0 = _profiles(base, n1, n0)
             first = n_kept
             for k in range(turns):
-                r, c, y = _turned_bottom(low, high, left, right, n1, n0, cy0, cx0, k, bottoms[n_kept])
+                r, c, y = _turned_bottom(
+                    low, high, left, right, n1, n0, cy0, cx0, k, bottoms[n_kept]
+                )
                 duplicate = False
                 for o in range(first, n_kept):  # a symmetric footprint: keep the first turn
                     if shape[o, 0] == r and shape[o, 1] == c and cy[o] == y:

@@ -74,7 +74,9 @@ texel square intersect.
 from __future__ import annotations
 
 import logging
+import os
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -115,18 +117,17 @@ _CANDIDATES = 4
 # points (over all orientations) that are slid and ranked.
 _RESTING_PER_ORIENTATION = 2
 _RESTING_STARTS = 8
-# Footprint columns sampled for the lower bound of the resting search.
+# Footprint columns tested first at each position of the resting search.
 _SKY_SAMPLES = 16
 # A chart whose convex hull fills at least this much of its minimum-area box is a rectangle for
 # the packer: it only turns by quarter turns.
 _BOXY = 0.95
-# After the first trial (which runs every rule), a trial tries the next placement rule only if
-# the previous one overshot the texture's side by at most this fraction: the rules' layouts
-# differ by a few percent (measured: the second rule fitted after overshoots of up to 4%).
-_RULE_MARGIN = 0.05
-# Placement rules of the raster packer, in the order a trial tries them first.
+# Placement rules of the raster packer; every trial runs all of them (side by side), and on a
+# tie in height the first one wins.
 _RULE_ORDER = ("rest", "holes")
 _SLIDE_STEPS = 1024
+# Footprints whose longest side is shorter than this (texels) turn by quarter turns only.
+_MIN_TURNING_SIDE = 24
 # The canvas of a trial is taller than the texture by 1/_HEADROOM, so that an over-full trial
 # still reports the height it needed.
 _HEADROOM = 2
@@ -483,6 +484,7 @@ def _raster_trial(
         angles.entry_ptr, np.asarray(order, dtype=np.int64), float(s), int(resolution),
         int(height), int(padding), int(turns), _RULE_CODES[rule], block, _MARGIN, _PACK_EPS,
         _RESTING_PER_ORIENTATION, _RESTING_STARTS, _CANDIDATES, _SKY_SAMPLES, _SLIDE_STEPS,
+        _MIN_TURNING_SIDE,
     )  # fmt: skip
     if n_placed < len(order):
         done = sum(charts[i].area for i in order[:n_placed])
@@ -566,6 +568,20 @@ def _scale_bounds(charts: list[_Chart], resolution: int, padding: int) -> float:
     return float(min(by_area, by_side))
 
 
+def _best_run(
+    runs: list[tuple[list | None, float, int | None]], resolution: int
+) -> tuple[list | None, float, int | None]:
+    """Combine the placement rules' trials at one scale: (placed, fraction, need).
+
+    The fitting layout that needs the least height wins (ties: the first rule); `need` is the
+    least height any rule needed and `fraction` the most area any rule placed.
+    """
+    fitting = [r for r in runs if r[0] is not None and (r[2] is None or r[2] <= resolution)]
+    placed = min(fitting, key=lambda r: -1 if r[2] is None else r[2])[0] if fitting else None
+    needs = [r[2] for r in runs if r[2] is not None]
+    return placed, max(r[1] for r in runs), min(needs) if needs else None
+
+
 def pack_charts(
     uvs: Sequence[np.ndarray],
     faces: Sequence[np.ndarray],
@@ -622,50 +638,42 @@ def pack_charts(
     oriented = _Angles(charts, angles) if cfg.method == "raster" else None
 
     # Safeguarded secant search on the scale. No scale above `hi` fits. A scale fits when one
-    # of the placement rules fits the charts (the rules are tried in turn). A raster trial runs
+    # of the placement rules fits the charts; the rules run side by side (one thread each: the
+    # compiled trials release the GIL) and the layout that needs less height wins. A trial runs
     # on a taller canvas and reports the height it needed, whose ratio to the texture predicts
-    # the scale (areas grow with its square); a failed trial reports the fraction of area it
-    # placed. Guesses outside the bracket's interior are replaced by bisection.
+    # the scale (areas grow with its square); a rectangle trial that fails reports the
+    # fraction of area it placed. Guesses outside the bracket's interior are replaced by
+    # bisection.
     hi = _scale_bounds(charts, G, p)
     lo, best = 0.0, None
     s = _FIRST_GUESS * hi
-    # The rule whose last trial needed the least height goes first. The first trial runs every
-    # rule; later ones try the next rule only when the previous one failed by a small margin.
-    last_need = dict.fromkeys(rules, 0.0)
     n_trials = 0
-    for n_trials in range(1, _MAX_SHRINK + 1):  # noqa: B007
-        placed, fraction, need = None, 0.0, None
-        for rule in sorted(rules, key=last_need.get):
-            got, frac, req = trial(charts, order, s, G, p, turns, rule, oriented)
-            ok = got is not None and (req is None or req <= G)
-            logger.debug("pack trial %d (%s): scale %.6g need %s -> %s", n_trials, rule, s, req, ok)
-            last_need[rule] = np.inf if req is None else req
-            fraction = max(fraction, frac)
-            if req is not None and (need is None or req < need):
-                need = req
-            if ok:
-                placed = got
+    with ThreadPoolExecutor(max_workers=min(len(rules), os.cpu_count() or 1)) as pool:
+        for n_trials in range(1, _MAX_SHRINK + 1):  # noqa: B007
+            def at_scale(rule: str, s: float = s):
+                return trial(charts, order, s, G, p, turns, rule, oriented)
+
+            runs = list(pool.map(at_scale, rules))
+            placed, fraction, need = _best_run(runs, G)
+            logger.debug("pack trial %d: scale %.6g needs %s", n_trials, s, [r[2] for r in runs])
+            if placed is not None:
+                lo, best = s, placed
+            else:
+                hi = s
+            if best is not None and (hi / lo <= 1 + _SCALE_TOL or n_trials >= _MAX_TRIALS):
                 break
-            if n_trials > 1 and (req is None or req - 2 * p > (G - 2 * p) * (1 + _RULE_MARGIN)):
-                break  # too far over for another rule to make up
-        if placed is not None:
-            lo, best = s, placed
-        else:
-            hi = s
-        if best is not None and (hi / lo <= 1 + _SCALE_TOL or n_trials >= _MAX_TRIALS):
-            break
-        if placed is None and need is None:
-            guess = s * float(np.clip(np.sqrt(fraction), 0.5, 0.97))
-        elif need is not None:
-            guess = s * float(np.sqrt((G - 2 * p) / max(need - 2 * p, 1)))
-        else:
-            guess = np.sqrt(lo * hi)
-        if lo > 0:
-            if not lo * (1 + _SCALE_TOL / 2) <= guess <= hi / (1 + _SCALE_TOL / 2):
+            if placed is None and need is None:
+                guess = s * float(np.clip(np.sqrt(fraction), 0.5, 0.97))
+            elif need is not None:
+                guess = s * float(np.sqrt((G - 2 * p) / max(need - 2 * p, 1)))
+            else:
                 guess = np.sqrt(lo * hi)
-        else:
-            guess = min(guess, 0.97 * hi)
-        s = float(guess)
+            if lo > 0:
+                if not lo * (1 + _SCALE_TOL / 2) <= guess <= hi / (1 + _SCALE_TOL / 2):
+                    guess = np.sqrt(lo * hi)
+            else:
+                guess = min(guess, 0.97 * hi)
+            s = float(guess)
     if best is None:
         raise SolverError(
             f"{len(charts)} charts do not fit a {G}x{G} texture with padding {p} at any scale "
