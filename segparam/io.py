@@ -1,15 +1,21 @@
 """Mesh files in and out: every file format segparam reads or writes lives here.
 
-Reading: OBJ, PLY, STL, OFF, GLB/GLTF (trimesh) and GIfTI surfaces ``.gii`` / ``.gii.gz``
-(nibabel, for cortical surfaces). Writing is atomic: each file is written under a temporary name in
-the destination folder and renamed into place, so a failed run leaves no partial file.
+Reading: OBJ, PLY and OFF (readers of our own, numpy over the whole file: relative OBJ indices,
+any whitespace, polygons triangulated inside their outline, PLY element counts checked against the
+data), STL and GLB/GLTF (trimesh) and GIfTI surfaces ``.gii`` / ``.gii.gz`` (nibabel, for cortical
+surfaces). Writing is atomic: each file is written under a temporary name in the destination
+folder and renamed into place, so a failed run leaves no partial file. Written coordinates keep
+their float64 value (OBJ text with 17 digits; a GLB far from the origin stores its offset as a
+float64 node translation).
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import gzip
 import logging
+import math
 import os
 import re
 import tempfile
@@ -83,6 +89,8 @@ def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     try:
         if suffix in (".gii", ".gii.gz"):
             V, F = _load_gifti(data, gz=suffix == ".gii.gz")
+        elif suffix in _READERS:
+            V, F = _READERS[suffix](data)
         else:
             V, F = _load_trimesh(data, suffix)
     except MeshFileError as exc:
@@ -99,33 +107,13 @@ def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     return V, F
 
 
-# An OBJ face corner whose vertex index is 0: OBJ counts from 1 (or from -1 backwards), and
-# trimesh would silently read 0 as a wrong (degenerate) face.
-_OBJ_ZERO_INDEX = re.compile(rb"(?m)^[ \t]*f[ \t][^\n]*?(?<=[ \t])-?0+(?=[/ \t\r\n]|$)")
-
-
-def _check_obj_indices(data: bytes) -> None:
-    """Refuse an OBJ with a face vertex index of 0, naming the line."""
-    match = _OBJ_ZERO_INDEX.search(data)
-    if match:
-        line = data.count(b"\n", 0, match.start()) + 1
-        raise MeshFileError(f"face on line {line} uses vertex index 0; OBJ indices start at 1")
-
-
 def _load_trimesh(data: bytes, suffix: str) -> tuple[np.ndarray, np.ndarray]:
+    """STL, GLB and glTF through trimesh (OBJ, PLY and OFF have readers of their own below)."""
     import io as _io
 
     import trimesh
 
-    if suffix in (".obj", ".off"):
-        if b"\0" in data:
-            raise MeshFileError(f"not a readable {suffix[1:].upper()} mesh (binary data, not text)")
-        # trimesh decodes non-UTF-8 text with the optional charset_normalizer (ImportError
-        # without it); the numbers are ASCII, so undecodable bytes can only be in names.
-        data = data.decode("utf-8", errors="replace").encode("utf-8")
-        if suffix == ".obj":
-            _check_obj_indices(data)
-    elif suffix == ".stl":
+    if suffix == ".stl":
         data = _stl_bytes(data)
     # trimesh logs tracebacks for parts we drop (normals, colours): keep them off stderr.
     trimesh_log = logging.getLogger("trimesh")
@@ -168,6 +156,709 @@ def _stl_bytes(data: bytes) -> bytes:
     )
 
 
+# ---------------------------------------------------------------------------------------------
+# Text: OBJ, OFF and ASCII PLY are read with numpy over the whole file, never line by line
+# ---------------------------------------------------------------------------------------------
+
+_NEWLINE = ord("\n")
+_SPACE = ord(" ")
+# The byte-order mark Windows editors put in front of UTF-8 text; it is not part of line 1.
+_UTF8_BOM = b"\xef\xbb\xbf"
+# Tab, vertical tab and form feed separate tokens like a space: mapped to spaces so that token
+# boundaries are one test on the bytes.
+_TO_SPACE = bytes.maketrans(b"\t\v\f", b"   ")
+_OTHER_SPACE = re.compile(rb"[\t\v\f]")
+# A comment runs from '#' to the end of the line (OBJ and OFF; also after data on a line).
+_COMMENT = re.compile(rb"#[^\n]*")
+_LEADING_SPACES = re.compile(rb"(?m)^ +")
+# OBJ: a backslash at the end of a line continues it on the next line. A run of continued lines
+# is matched from its first line (anchored, so the scan stays linear).
+_OBJ_CONTINUED = re.compile(rb"(?m)^(?:[^\n]*\\ *\n)+[^\n]*")
+_OBJ_LINE_BREAK = re.compile(rb"\\ *\n")
+# A token that is not a number (searched only to name the line once parsing has failed).
+_FLOAT_TOKEN = rb"[+-]?(?:\d+\.?\d*(?:[eE][+-]?\d+)?|\.\d+(?:[eE][+-]?\d+)?|(?i:nan|inf|infinity))"
+_INT_TOKEN = rb"[+-]?\d+"
+_NOT_A_FLOAT = re.compile(rb"(?<![^ \n])(?!" + _FLOAT_TOKEN + rb"(?![^ \n]))[^ \n]+")
+_NOT_AN_INT = re.compile(rb"(?<![^ \n])(?!" + _INT_TOKEN + rb"(?![^ \n]))[^ \n]+")
+
+
+def _clean_text(data: bytes, fmt: str, *, comments: bool) -> bytes:
+    """Text as lines that each end in ``\\n``, tokens separated by single-byte spaces.
+
+    A UTF-8 byte-order mark is dropped, CRLF and CR line ends become LF, tabs (and vertical tabs,
+    form feeds) become spaces, spaces at line starts go and, with ``comments``, so does everything
+    from a ``#`` to the line end. The number of lines does not change, so line numbers in messages
+    are the file's. Bytes that are not UTF-8 (names in another encoding) stay as they are.
+    """
+    if data.startswith(_UTF8_BOM):
+        data = data[len(_UTF8_BOM) :]
+    if b"\0" in data:
+        raise MeshFileError(f"not a readable {fmt} mesh (binary data, not text)")
+    if b"\r" in data:
+        data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+    if _OTHER_SPACE.search(data):
+        data = data.translate(_TO_SPACE)
+    if comments and b"#" in data:
+        data = _COMMENT.sub(b"", data)
+    if not data.endswith(b"\n"):
+        data += b"\n"
+    if data.startswith(b" ") or b"\n " in data:
+        data = _LEADING_SPACES.sub(b"", data)
+    return data
+
+
+def _token_table(text: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """The line of every token and the number of tokens on every line of clean text.
+
+    Returns
+    -------
+    token_line : (k,) int64 ndarray
+        Line (0-based) of each token, in order.
+    counts : (lines,) int64 ndarray
+    """
+    b = np.frombuffer(text, dtype=np.uint8)
+    sep = (b == _SPACE) | (b == _NEWLINE)
+    start = ~sep
+    start[1:] &= sep[:-1]
+    newlines = np.flatnonzero(b == _NEWLINE)
+    token_line = np.searchsorted(newlines, np.flatnonzero(start))
+    return token_line, np.bincount(token_line, minlength=len(newlines))
+
+
+def _numbers(text: bytes, count: int, dtype) -> np.ndarray | None:
+    """The ``count`` numbers of clean text in order, or None if a token is not one number.
+
+    ``np.fromstring`` parses in C and stops at the first token it cannot read: a ValueError, or
+    on older numpy a DeprecationWarning (an exception where warnings are errors) and a short
+    array, so comparing with the token count catches every bad token. (No ``catch_warnings``:
+    it changes process-wide state, and batch workers read meshes in threads.)
+    """
+    if count == 0:
+        return np.zeros(0, dtype=dtype)
+    try:
+        values = np.fromstring(text, dtype=dtype, sep=" ")
+    except (ValueError, DeprecationWarning):
+        return None
+    return values if len(values) == count else None
+
+
+def _bad_token(text: bytes, pattern: re.Pattern) -> tuple[int, str]:
+    """Line (0-based) and text of the first token of clean text that is not a number, or -1."""
+    match = pattern.search(text)
+    if match is None:
+        return -1, ""
+    return text.count(b"\n", 0, match.start()), match.group().decode("utf-8", "replace")[:40]
+
+
+def _ragged_arange(counts: np.ndarray) -> np.ndarray:
+    """``0 .. c - 1`` for every ``c`` in ``counts``, concatenated."""
+    starts = np.cumsum(counts) - counts
+    return np.arange(int(counts.sum()), dtype=np.int64) - np.repeat(starts, counts)
+
+
+def _load_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices and triangulated faces of an OBJ file; every other kind of line is ignored.
+
+    ``v`` lines give vertices (x y z, further values such as w or colours ignored), ``f`` lines
+    faces with corners ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn``. Positive indices count from 1,
+    negative ones back from the last vertex read *before* that face line (streaming exporters
+    interleave ``v`` and ``f -3 -2 -1``). Faces keep the file's order; polygons are triangulated
+    by :func:`_triangulate`.
+    """
+    text = _clean_text(data, "OBJ", comments=True)
+    if b"\\" in text:
+        text = _OBJ_CONTINUED.sub(_join_continued, text)
+    buf = np.frombuffer(text, dtype=np.uint8)
+    newlines = np.flatnonzero(buf == _NEWLINE)
+    starts = np.zeros(len(newlines), dtype=np.int64)
+    starts[1:] = newlines[:-1] + 1
+    # Keyword of each line: 'v' or 'f' followed by a space or the line end.
+    first = buf[starts]
+    bare = np.isin(buf[np.minimum(starts + 1, len(buf) - 1)], (_SPACE, _NEWLINE))
+    kind = np.zeros(len(starts), dtype=np.uint8)
+    kind[bare & (first == ord("v"))] = 1
+    kind[bare & (first == ord("f"))] = 2
+    work = buf.copy()
+    work[starts[kind > 0]] = _SPACE  # the keyword goes, the numbers stay
+    per_byte = np.repeat(kind, newlines - starts + 1)
+    V = _obj_vertices(work[per_byte == 1].tobytes(), np.flatnonzero(kind == 1) + 1)
+    is_v = kind == 1
+    F = _obj_faces(
+        work[per_byte == 2].tobytes(),
+        np.flatnonzero(kind == 2) + 1,
+        np.cumsum(is_v)[kind == 2],
+        V,
+    )
+    return V, F
+
+
+def _join_continued(match: re.Match) -> bytes:
+    """One logical OBJ line from lines ending in a backslash, followed by the newlines it ate."""
+    run = match.group()
+    return _OBJ_LINE_BREAK.sub(b" ", run) + b"\n" * run.count(b"\n")
+
+
+def _obj_vertices(text: bytes, lines: np.ndarray) -> np.ndarray:
+    """(n, 3) coordinates of the ``v`` lines (keyword blanked) on file lines ``lines``."""
+    token_line, counts = _token_table(text)
+    short = np.flatnonzero(counts < 3)
+    if len(short):
+        i = short[0]
+        raise MeshFileError(
+            f"vertex on line {lines[i]} has {counts[i]} coordinates; a vertex needs x y z"
+        )
+    values = _numbers(text, len(token_line), np.float64)
+    if values is None:
+        row, token = _bad_token(text, _NOT_A_FLOAT)
+        where = f" on line {lines[row]}" if row >= 0 else ""
+        raise MeshFileError(f"vertex{where} has a coordinate that is not a number: {token!r}")
+    if (counts == 3).all():
+        return values.reshape(-1, 3)
+    first = np.cumsum(counts) - counts
+    return values[first[:, None] + np.arange(3)]
+
+
+def _obj_faces(text: bytes, lines: np.ndarray, before: np.ndarray, V: np.ndarray) -> np.ndarray:
+    """Triangles of the ``f`` lines (keyword blanked) on file lines ``lines``.
+
+    ``before`` holds, per face line, the number of ``v`` lines above it: the base of negative
+    indices.
+    """
+    if b"/" in text:  # keep the vertex index of every corner, drop /vt and /vn
+        lone = re.search(rb"(?<![^ \n])/", text)
+        if lone:
+            line = lines[text.count(b"\n", 0, lone.start())]
+            raise MeshFileError(f"face on line {line} has a corner without a vertex index")
+        text = re.sub(rb"/[^ \n]*", b"", text)
+    token_line, counts = _token_table(text)
+    few = np.flatnonzero(counts < 3)
+    if len(few):
+        i = few[0]
+        raise MeshFileError(
+            f"face on line {lines[i]} has {counts[i]} corners; a face needs at least 3"
+        )
+    raw = _numbers(text, len(token_line), np.int64)
+    if raw is None:
+        row, token = _bad_token(text, _NOT_AN_INT)
+        where = f" on line {lines[row]}" if row >= 0 else ""
+        raise MeshFileError(f"face{where} has a vertex index that is not a whole number: {token!r}")
+    zero = np.flatnonzero(raw == 0)
+    if len(zero):
+        line = lines[token_line[zero[0]]]
+        raise MeshFileError(f"face on line {line} uses vertex index 0; OBJ indices start at 1")
+    base = before[token_line]
+    idx = np.where(raw > 0, raw - 1, base + raw)
+    bad = np.flatnonzero((idx < 0) | (idx >= len(V)))
+    if len(bad):
+        j = bad[0]
+        line = lines[token_line[j]]
+        known = f"the file has {len(V)}" if raw[j] > 0 else f"{base[j]} precede that line"
+        raise MeshFileError(
+            f"face on line {line} uses vertex index {raw[j]}, out of range ({known} vertices)"
+        )
+    return _triangulate(V, idx, counts)
+
+
+# OFF header keywords: OFF, with optional per-vertex texture (ST), colour (C), normal (N) columns.
+_OFF_KEYWORD = re.compile(rb"(?:ST)?C?N?OFF")
+_FIRST_LINE = re.compile(rb"\s*([^\n]*)\n")
+
+
+def _load_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices and triangulated faces of an OFF file (one vertex or face per line).
+
+    Face lines are ``k i1 .. ik`` with optional colour values after the indices. The header's
+    counts must match the lines of data.
+    """
+    text = _clean_text(data, "OFF", comments=True)
+    head = _FIRST_LINE.match(text)
+    words = head.group(1).split() if head else []
+    if not words or not _OFF_KEYWORD.fullmatch(words[0]):
+        first = words[0].decode("utf-8", "replace")[:20] if words else ""
+        raise MeshFileError(f"not a readable OFF mesh (starts with {first!r}, not OFF)")
+    counts_words, pos = words[1:], head.end()
+    if not counts_words:  # the counts are on the next non-blank line
+        line = _FIRST_LINE.match(text, pos)
+        counts_words, pos = (line.group(1).split(), line.end()) if line else ([], pos)
+    try:
+        nv, nf = (int(w) for w in counts_words[:2])
+    except ValueError:
+        nv = nf = -1
+    if len(counts_words) < 2 or min(nv, nf) < 0:
+        raise MeshFileError("not a readable OFF mesh (no vertex and face counts after OFF)")
+    body, line0 = text[pos:], text.count(b"\n", 0, pos)
+    token_line, counts = _token_table(body)
+    rows = np.flatnonzero(counts)  # non-blank lines
+    if len(rows) != nv + nf:
+        raise MeshFileError(
+            f"header announces {_announced([('vertex', nv), ('face', nf)])} "
+            f"({nv + nf} lines of data), data holds {len(rows)} lines"
+        )
+    values = _numbers(body, len(token_line), np.float64)
+    if values is None:
+        row, token = _bad_token(body, _NOT_A_FLOAT)
+        where = f"line {line0 + row + 1} holds" if row >= 0 else "data holds"
+        raise MeshFileError(f"{where} a value that is not a number: {token!r}")
+    row_counts = counts[rows]
+    row_first = np.cumsum(row_counts) - row_counts
+    row_line = line0 + rows + 1
+    short = np.flatnonzero(row_counts[:nv] < 3)
+    if len(short):
+        raise MeshFileError(f"vertex on line {row_line[short[0]]} has fewer than 3 coordinates")
+    V = values[row_first[:nv, None] + np.arange(3)]
+    first, size = row_first[nv:] + 1, values[row_first[nv:]]
+    bad = ~(size >= 3) | (size != np.floor(size)) | (size > row_counts[nv:] - 1)
+    if bad.any():
+        i = np.flatnonzero(bad)[0]
+        raise MeshFileError(
+            f"face on line {row_line[nv + i]} announces {values[row_first[nv + i]]:g} corners "
+            f"and holds {row_counts[nv + i] - 1} values; a face needs at least 3 corners"
+        )
+    size = size.astype(np.int64)
+    token = np.repeat(first, size) + _ragged_arange(size)
+    idx = values[token]
+    bad = (idx != np.floor(idx)) | ~(idx >= 0) | ~(idx < nv)
+    if bad.any():
+        j = np.flatnonzero(bad)[0]
+        line = line0 + token_line[token[j]] + 1
+        raise MeshFileError(
+            f"face on line {line} has a vertex index that is not a whole number: {idx[j]:g}"
+            if idx[j] != np.floor(idx[j])
+            else f"face on line {line} uses vertex index {idx[j]:g}, out of range "
+            f"({nv} vertices, counted from 0)"
+        )
+    return V, _triangulate(V, idx.astype(np.int64), size)
+
+
+# ---------------------------------------------------------------------------------------------
+# PLY: ASCII and binary, every element's count checked against the data
+# ---------------------------------------------------------------------------------------------
+
+_PLY_TYPES = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
+    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
+    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}  # fmt: skip
+_PLY_FORMATS = {"ascii": "", "binary_little_endian": "<", "binary_big_endian": ">"}
+_PLY_END_HEADER = re.compile(rb"(?m)^end_header[ \t]*\r?$\n?")
+# Names exporters give the list of a face's vertices.
+_PLY_FACE_LISTS = ("vertex_indices", "vertex_index")
+
+
+@dataclasses.dataclass
+class _PlyProperty:
+    name: str
+    dtype: np.dtype  # of the value, or of the list items
+    count: np.dtype | None = None  # of a list's length; None for a single value
+
+
+@dataclasses.dataclass
+class _PlyElement:
+    name: str
+    size: int
+    props: list[_PlyProperty] = dataclasses.field(default_factory=list)
+
+
+def _load_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices and triangulated faces of an ASCII or binary PLY file.
+
+    Every element the header announces must be in the data, row by row, and the data must end
+    where the last element ends: a header that announces more (or fewer) vertices or faces than
+    the data holds is an error, never a mesh read from the wrong bytes.
+    """
+    fmt, elements, body_start, line0 = _ply_header(data)
+    named = {e.name: e for e in elements}
+    vertex = named.get("vertex")
+    if vertex is None:
+        raise MeshFileError("PLY header has no vertex element")
+    scalars = {p.name for p in vertex.props if p.count is None}
+    if not {"x", "y", "z"} <= scalars:
+        raise MeshFileError("PLY vertex element has no x, y and z properties")
+    face = named.get("face")
+    face_list = None
+    if face is not None:
+        lists = [p.name for p in face.props if p.count is not None]
+        known = [name for name in _PLY_FACE_LISTS if name in lists]
+        face_list = known[0] if known else lists[0] if len(lists) == 1 else None
+        if face_list is None:
+            raise MeshFileError("PLY face element has no vertex_indices list")
+    wanted = {"vertex": {"x", "y", "z"}, "face": {face_list}}
+    body = data[body_start:]
+    if fmt == "ascii":
+        columns = _ply_ascii(body, elements, line0, wanted)
+    else:
+        columns = _ply_binary(body, elements, wanted)
+    V = np.stack([columns["vertex"][c] for c in "xyz"], axis=1).astype(np.float64)
+    if face is None:
+        return V, np.zeros((0, 3), dtype=np.int64)
+    idx, size = columns["face"][face_list]
+    few = np.flatnonzero(size < 3)
+    if len(few):
+        raise MeshFileError(
+            f"face {few[0]} has {size[few[0]]} corners (a face needs at least 3): corrupt data, "
+            f"or the header, which announces {_announced([(e.name, e.size) for e in elements])}, "
+            "does not match it"
+        )
+    bad = (idx != np.floor(idx)) | ~(idx >= 0) | ~(idx < len(V))
+    if bad.any():
+        j = np.flatnonzero(bad)[0]
+        face_of = np.repeat(np.arange(len(size)), size)
+        raise MeshFileError(
+            f"face {face_of[j]} has a vertex index that is not a whole number: {idx[j]:g}"
+            if idx[j] != np.floor(idx[j])
+            else f"face indices out of range: face {face_of[j]} uses vertex {idx[j]:g}, "
+            f"the file has {len(V)} vertices (counted from 0)"
+        )
+    return V, _triangulate(V, idx.astype(np.int64), size)
+
+
+def _ply_header(data: bytes) -> tuple[str, list[_PlyElement], int, int]:
+    """Format, elements, where the data starts and how many lines the header has."""
+    if not data.startswith(b"ply"):
+        raise MeshFileError("not a readable PLY mesh (it does not start with 'ply')")
+    end = _PLY_END_HEADER.search(data)
+    if end is None:
+        raise MeshFileError("PLY header has no end_header line (truncated or not a PLY file)")
+    fmt = None
+    elements: list[_PlyElement] = []
+    lines = data[: end.start()].decode("latin-1").replace("\r", "").split("\n")
+    for number, line in enumerate(lines[1:], 2):  # the header's few lines
+        words = line.split()
+        key = words[0] if words else "comment"
+        try:
+            if key in ("comment", "obj_info"):
+                continue
+            if key == "format":
+                fmt = words[1]
+                if fmt not in _PLY_FORMATS:
+                    raise ValueError(f"unknown format {fmt!r}")
+            elif key == "element":
+                name, size = words[1], int(words[2])
+                if size < 0 or len(words) != 3:
+                    raise ValueError("expected 'element <name> <count>'")
+                elements.append(_PlyElement(name, size))
+            elif key == "property":
+                if not elements:
+                    raise ValueError("property before any element")
+                order = _PLY_FORMATS.get(fmt or "ascii", "")
+                if words[1] == "list":
+                    count, item, name = words[2:5]
+                    elements[-1].props.append(
+                        _PlyProperty(
+                            name,
+                            np.dtype(order + _PLY_TYPES[item]),
+                            np.dtype(order + _PLY_TYPES[count]),
+                        )
+                    )
+                else:
+                    elements[-1].props.append(
+                        _PlyProperty(words[2], np.dtype(order + _PLY_TYPES[words[1]]))
+                    )
+            else:
+                raise ValueError(f"unknown keyword {key!r}")
+        except (ValueError, IndexError, KeyError) as exc:
+            what = (
+                f"unknown type {exc}"
+                if isinstance(exc, KeyError)
+                else "too few words"
+                if isinstance(exc, IndexError)
+                else str(exc)
+            )
+            raise MeshFileError(f"PLY header line {number}: {what}") from None
+    if fmt is None:
+        raise MeshFileError("PLY header has no format line")
+    return fmt, elements, end.end(), data.count(b"\n", 0, end.end())
+
+
+def _announced(counts: list[tuple[str, int]]) -> str:
+    """'3 vertices and 1 face' from [('vertex', 3), ('face', 1)]."""
+    words = [
+        f"{n} {name if n == 1 else name[:-2] + 'ices' if name.endswith('ex') else name + 's'}"
+        for name, n in counts
+    ]
+    return words[0] if len(words) == 1 else ", ".join(words[:-1]) + " and " + words[-1]
+
+
+def _ply_ascii(body: bytes, elements, line0: int, wanted) -> dict:
+    """Columns of an ASCII PLY's elements: one element per line, values separated by spaces.
+
+    Returns ``{element: {property: values}}`` for the wanted properties; a list property gives
+    ``(items, lengths)``.
+    """
+    text = _clean_text(body, "PLY", comments=False)
+    token_line, counts = _token_table(text)
+    rows = np.flatnonzero(counts)  # non-blank lines
+    expected = sum(e.size for e in elements)
+    if len(rows) != expected:
+        raise MeshFileError(
+            f"header announces {_announced([(e.name, e.size) for e in elements])} "
+            f"({expected} lines of data), data holds {len(rows)} lines"
+        )
+    values = _numbers(text, len(token_line), np.float64)
+    if values is None:
+        row, token = _bad_token(text, _NOT_A_FLOAT)
+        where = f"line {line0 + row + 1} holds" if row >= 0 else "data holds"
+        raise MeshFileError(f"PLY {where} a value that is not a number: {token!r}")
+    row_counts = counts[rows]
+    row_first = np.cumsum(row_counts) - row_counts
+    out: dict[str, dict] = {}
+    done = 0
+    for e in elements:  # the header's few elements and properties
+        rows_e = slice(done, done + e.size)
+        done += e.size
+        cur, end = row_first[rows_e].copy(), row_first[rows_e] + row_counts[rows_e]
+        columns = {}
+        for p in e.props:
+            if p.count is None:
+                bad = cur >= end
+                if not bad.any() and p.name in wanted.get(e.name, ()):
+                    columns[p.name] = values[cur]
+                step = 1
+            else:
+                n = values[np.minimum(cur, len(values) - 1)]
+                bad = (cur >= end) | ~(n >= 0) | (n != np.floor(n)) | (cur + 1 + n > end)
+                step = 1 + np.where(bad, 0, n).astype(np.int64)
+                if not bad.any() and p.name in wanted.get(e.name, ()):
+                    k = step - 1
+                    columns[p.name] = (values[np.repeat(cur + 1, k) + _ragged_arange(k)], k)
+            if bad.any():
+                raise _ply_row_error(e, np.flatnonzero(bad)[0], rows, line0, rows_e, counts)
+            cur = cur + step
+        if (cur != end).any():
+            raise _ply_row_error(e, np.flatnonzero(cur != end)[0], rows, line0, rows_e, counts)
+        out[e.name] = columns
+    return out
+
+
+def _ply_row_error(e, i, rows, line0, rows_e, counts) -> MeshFileError:
+    """An ASCII PLY row whose values do not fit its element's properties."""
+    line = rows[rows_e][i]
+    return MeshFileError(
+        f"header announces {_announced([(e.name, e.size)])}, but line {line0 + line + 1} "
+        f"({e.name} {i}) holds {counts[line]} values that do not fit the {e.name} properties"
+    )
+
+
+def _gather(u8: np.ndarray, pos: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """Values of ``dtype`` stored at byte offsets ``pos`` of a byte array."""
+    raw = u8[pos[:, None] + np.arange(dtype.itemsize)]
+    return raw.view(dtype).reshape(-1)
+
+
+def _ply_binary(body: bytes, elements, wanted) -> dict:
+    """Columns of a binary PLY's elements (as :func:`_ply_ascii`); the data must end where the
+    last element ends."""
+    u8 = np.frombuffer(body, dtype=np.uint8)
+    out: dict[str, dict] = {}
+    pos = 0
+    for e in elements:  # the header's few elements and properties
+        starts, pos = _ply_rows(u8, pos, e, elements)
+        cur = starts.copy()
+        columns = {}
+        for p in e.props:
+            take = p.name in wanted.get(e.name, ())
+            if p.count is None:
+                if take:
+                    columns[p.name] = _gather(u8, cur, p.dtype)
+                cur += p.dtype.itemsize
+                continue
+            k = _gather(u8, cur, p.count).astype(np.int64)
+            cur += p.count.itemsize
+            if take:
+                at = np.repeat(cur, k) + _ragged_arange(k) * p.dtype.itemsize
+                columns[p.name] = (_gather(u8, at, p.dtype), k)
+            cur += k * p.dtype.itemsize
+        out[e.name] = columns
+    if pos != len(u8):
+        raise MeshFileError(
+            f"corrupt binary PLY: header announces "
+            f"{_announced([(e.name, e.size) for e in elements])} ({pos} bytes of data), "
+            f"data holds {len(u8)} bytes"
+        )
+    return out
+
+
+def _ply_row_ends(u8: np.ndarray, pos: np.ndarray, e: _PlyElement) -> np.ndarray:
+    """Where a row of element ``e`` starting at each byte offset ``pos`` ends; -1 if it would run
+    past the data (or has a negative list length)."""
+    cur = pos.astype(np.int64)
+    ok = np.ones(len(cur), dtype=bool)
+    for p in e.props:
+        if p.count is None:
+            cur = cur + p.dtype.itemsize
+            continue
+        inside = cur + p.count.itemsize <= len(u8)
+        k = np.zeros(len(cur), dtype=np.int64)
+        k[inside] = _gather(u8, cur[inside], p.count)
+        ok &= inside & (k >= 0)
+        cur = cur + p.count.itemsize + np.maximum(k, 0) * p.dtype.itemsize
+    return np.where(ok & (cur <= len(u8)), cur, -1)
+
+
+def _ply_rows(u8: np.ndarray, pos: int, e: _PlyElement, elements) -> tuple[np.ndarray, int]:
+    """Byte offsets of the rows of element ``e`` whose data starts at ``pos``, and its end.
+
+    Rows without lists, or whose lists all have the first row's length, are one arange. Lists of
+    different lengths (triangles and quads) make every row's start depend on the one before: the
+    chain is followed with numpy over every byte offset (see :func:`_follow`).
+    """
+    n = e.size
+    fixed = all(p.count is None for p in e.props)
+    if n == 0:
+        return np.zeros(0, dtype=np.int64), pos
+    if fixed:
+        size = sum(p.dtype.itemsize for p in e.props)
+        if size == 0:  # an element without properties takes no bytes
+            return np.full(n, pos, dtype=np.int64), pos
+    else:
+        size = int(_ply_row_ends(u8, np.array([pos]), e)[0]) - pos
+    if size > 0 and pos + n * size <= len(u8):
+        starts = pos + size * np.arange(n, dtype=np.int64)
+        if fixed or (_ply_row_ends(u8, starts, e) == starts + size).all():
+            return starts, pos + n * size
+    if not fixed and size > 0:
+        # Row end at every byte offset from pos on, as an index relative to pos; the sentinel
+        # (one past the data) stands for "runs past the data".
+        sentinel = len(u8) - pos + 1
+        ends = _ply_row_ends(u8, np.arange(pos, len(u8) + 1, dtype=np.int64), e)
+        nxt = np.append(np.where(ends >= 0, ends - pos, sentinel), sentinel)
+        rows = _follow(nxt, n)
+        stop = int(nxt[rows[-1]])
+        if stop != sentinel and not (rows == sentinel).any():
+            return rows + pos, pos + stop
+        held = int(np.argmax(rows == sentinel)) if (rows == sentinel).any() else n - 1
+    else:
+        held = max(0, (len(u8) - pos) // size) if size > 0 else 0
+    raise MeshFileError(
+        f"truncated or corrupt binary PLY: header announces "
+        f"{_announced([(x.name, x.size) for x in elements])}, data holds only {held} "
+        f"{_announced([(e.name, held)]).split(' ', 1)[1]}"
+    )
+
+
+def _follow(nxt: np.ndarray, n: int) -> np.ndarray:
+    """The first ``n`` nodes of the chain ``0, nxt[0], nxt[nxt[0]], ...``.
+
+    Square-root blocking: ``nxt`` composed with itself ``B ~ sqrt(n)`` times gives every B-th
+    node (B scalar steps); B vectorized steps from those fill in the rest. Time
+    ``O(len(nxt) log B + n)`` and three arrays of ``len(nxt)`` entries.
+    """
+    block = max(1, math.isqrt(n))
+    jump = np.arange(len(nxt))
+    base, e = nxt, block
+    while e:  # jump = nxt applied `block` times, by repeated squaring
+        if e & 1:
+            jump = base[jump]
+        base, e = base[base], e >> 1
+    coarse = np.empty(-(-n // block), dtype=np.int64)
+    node = 0
+    for j in range(len(coarse)):  # ~sqrt(n) steps, each a block of rows
+        coarse[j] = node
+        node = jump[node]
+    rows = np.empty((len(coarse), block), dtype=np.int64)
+    for t in range(block):  # ~sqrt(n) vectorized steps
+        rows[:, t] = coarse
+        coarse = nxt[coarse]
+    return rows.reshape(-1)[:n]
+
+
+# ---------------------------------------------------------------------------------------------
+# Polygons to triangles
+# ---------------------------------------------------------------------------------------------
+
+# A polygon whose Newell normal (twice its area, in units of its extent squared) is below this is
+# flat to round-off: no plane to triangulate in, it is fanned (its triangles have no area).
+_FLAT_POLYGON = 1e-12
+
+
+def _triangulate(V: np.ndarray, idx: np.ndarray, size: np.ndarray) -> np.ndarray:
+    """Triangles of polygons: ``size[i]`` corners each, their vertex indices one after another.
+
+    A k-gon becomes k - 2 triangles, in the file's order and winding. A quad is split along the
+    diagonal that keeps both triangles inside it and facing along its normal (so a concave quad
+    is split at its reflex corner), the 0-2 diagonal when both do; larger polygons are ear-clipped
+    in their best-fit plane (:func:`_ear_clip`).
+    """
+    size = np.asarray(size, dtype=np.int64)
+    idx = np.asarray(idx, dtype=np.int64)
+    if (size == 3).all():
+        return idx.reshape(-1, 3)
+    first = np.cumsum(size) - size
+    count = size - 2
+    out = np.cumsum(count) - count
+    F = np.empty((int(count.sum()), 3), dtype=np.int64)
+    tri = size == 3
+    F[out[tri]] = idx[first[tri, None] + np.arange(3)]
+    quad = np.flatnonzero(size == 4)
+    if len(quad):
+        Q = idx[first[quad, None] + np.arange(4)]
+        F[out[quad]], F[out[quad] + 1] = _split_quads(V, Q)
+    for p in np.flatnonzero(size > 4):  # the rare polygons with more than 4 corners
+        corners = idx[first[p] : first[p] + size[p]]
+        F[out[p] : out[p] + count[p]] = corners[_ear_clip(V[corners])]
+    return F
+
+
+def _split_quads(V: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two triangles per quad (q, 4): the first of each pair, then the second."""
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        P = V[Q] - V[Q[:, :1]]  # relative to corner 0 and scaled: no overflow, no offset
+        scale = np.abs(P).max(axis=(1, 2))
+        P = P / np.where(scale > 0, scale, 1.0)[:, None, None]
+        normal = np.cross(P, np.roll(P, -1, axis=1)).sum(axis=1)  # Newell
+
+        def facing(a, b, c):
+            return np.einsum("ij,ij->i", normal, np.cross(P[:, b] - P[:, a], P[:, c] - P[:, a]))
+
+        along_02 = (facing(0, 1, 2) > 0) & (facing(0, 2, 3) > 0)
+        along_13 = (facing(0, 1, 3) > 0) & (facing(1, 2, 3) > 0)
+    use_13 = (along_13 & ~along_02)[:, None]
+    return (
+        np.where(use_13, Q[:, [0, 1, 3]], Q[:, [0, 1, 2]]),
+        np.where(use_13, Q[:, [1, 2, 3]], Q[:, [0, 2, 3]]),
+    )
+
+
+def _ear_clip(P: np.ndarray) -> np.ndarray:
+    """k - 2 triangles (local corner numbers) of a polygon with corners ``P`` (k, 3).
+
+    The polygon is projected onto the plane of its Newell normal, with axes such that its winding
+    stays counter-clockwise, and triangulated by earcut (``mapbox_earcut``); triangles keep the
+    polygon's winding. A polygon with no plane, or that earcut cannot cut into k - 2 triangles
+    (repeated corners), is fanned from its first corner.
+    """
+    k = len(P)
+    fan = np.stack([np.zeros(k - 2, dtype=np.int64), np.arange(1, k - 1), np.arange(2, k)], 1)
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        P = P - P[0]
+        scale = np.abs(P).max()
+        if not (np.isfinite(scale) and scale > 0):
+            return fan
+        P = P / scale
+        normal = np.cross(P, np.roll(P, -1, axis=0)).sum(axis=0)
+        length = np.linalg.norm(normal)
+        if not length > _FLAT_POLYGON:
+            return fan
+        normal = normal / length
+        axis = np.zeros(3)
+        axis[np.argmin(np.abs(normal))] = 1.0
+        u = np.cross(normal, axis)
+        u /= np.linalg.norm(u)
+        w = np.cross(normal, u)  # (u, w, normal) right-handed: the winding stays positive
+        uv = np.ascontiguousarray(np.stack([P @ u, P @ w], axis=1))
+    import mapbox_earcut
+
+    tris = mapbox_earcut.triangulate_float64(uv, np.array([k], dtype=np.uint32))
+    tris = np.asarray(tris, dtype=np.int64).reshape(-1, 3)
+    if len(tris) != k - 2:
+        return fan
+    a, b, c = uv[tris[:, 0]], uv[tris[:, 1]], uv[tris[:, 2]]
+    flipped = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) < (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    tris[flipped] = tris[flipped][:, ::-1]
+    return tris
+
+
 def _load_gifti(data: bytes, *, gz: bool) -> tuple[np.ndarray, np.ndarray]:
     import nibabel as nib
 
@@ -182,6 +873,10 @@ def _load_gifti(data: bytes, *, gz: bool) -> tuple[np.ndarray, np.ndarray]:
         np.asarray(points[0].data, dtype=np.float64).reshape(-1, 3),
         np.asarray(tris[0].data, dtype=np.int64).reshape(-1, 3),
     )
+
+
+# Formats read by segparam's own numpy readers; the others go through trimesh (or nibabel).
+_READERS = {".obj": _load_obj, ".ply": _load_ply, ".off": _load_off}
 
 
 @contextlib.contextmanager
@@ -202,6 +897,11 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         tmp_path.unlink(missing_ok=True)
 
 
+# 17 significant digits write every float64 so that it reads back bit for bit (9 digits moved a
+# 3-unit object 1e7 from the origin by 0.05); uvs too, so that no reloaded sliver flips.
+_FLOAT_FORMAT = "%.17g"
+
+
 def write_obj(
     path: str | os.PathLike,
     V: np.ndarray,
@@ -213,6 +913,9 @@ def write_obj(
     material: str = "atlas",
 ) -> None:
     """Write an OBJ with optional texture coordinates (``vt``) and a material library.
+
+    Coordinates are written with 17 significant digits: :func:`load_mesh` reads back the same
+    float64 values bit for bit.
 
     Parameters
     ----------
@@ -228,9 +931,9 @@ def write_obj(
     lines = ["# written by segparam"]
     if mtl:
         lines.append(f"mtllib {mtl}")
-    body = [_rows("v", V, "%.9g")]
+    body = [_rows("v", V, _FLOAT_FORMAT)]
     if uv is not None:
-        body.append(_rows("vt", uv, "%.9g"))
+        body.append(_rows("vt", uv, _FLOAT_FORMAT))
         T = F if uv_faces is None else uv_faces
         corners = np.stack([F + 1, T + 1], axis=2).reshape(len(F), 6)
         faces = _rows("f", corners, "%d", sep=("/", " "))
@@ -349,8 +1052,6 @@ def save_atlas(atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: in
     """
     import json
 
-    import trimesh
-
     outdir = Path(outdir)
     size = size or atlas.packing.resolution
     names = {
@@ -377,13 +1078,9 @@ def save_atlas(atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: in
             uv_faces=atlas.uv_F,
             mtl=names["mtl"],
         )
-        mesh = trimesh.Trimesh(
-            vertices=atlas.V[atlas.uv_vertex],
-            faces=atlas.uv_F,
-            visual=trimesh.visual.TextureVisuals(uv=atlas.uv, image=checker),
-            process=False,
+        (stage / names["glb"]).write_bytes(
+            _glb_bytes(atlas.V[atlas.uv_vertex], atlas.uv_F, atlas.uv, checker)
         )
-        (stage / names["glb"]).write_bytes(mesh.export(file_type="glb"))
         render_uv_layout(atlas.uv, atlas.uv_F, labels=atlas.chart_of_face, size=size).save(
             stage / names["uv"], format="PNG"
         )
@@ -391,6 +1088,48 @@ def save_atlas(atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: in
             json.dumps(atlas.report(), indent=1, sort_keys=False) + "\n", encoding="utf-8"
         )
     return [outdir / name for name in names.values()]
+
+
+# glTF stores positions as float32 (24-bit mantissa). Up to this many times its size from the
+# origin an object keeps them to 8 * 2**-24 < 1e-6 of its size; farther away, positions are stored
+# relative to the bounding-box centre and the centre becomes the node's float64 translation.
+_GLB_MAX_OFFSET = 8.0
+
+
+def _glb_bytes(V: np.ndarray, F: np.ndarray, uv: np.ndarray, image) -> bytes:
+    """A binary glTF of a textured triangle mesh that keeps float64 placement.
+
+    An object near the origin is written as before (one mesh, positions as they are). One far from
+    the origin (1e7 away, say) would lose up to half a unit to float32 positions: its positions are
+    written relative to its bounding-box centre and the node carries the centre as its
+    ``translation``, which glTF keeps as a JSON (double) number.
+    """
+    import trimesh
+
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    size = float((hi - lo).max())
+    visual = trimesh.visual.TextureVisuals(uv=uv, image=image)
+    if not np.abs(V).max() > _GLB_MAX_OFFSET * size:
+        mesh = trimesh.Trimesh(vertices=V, faces=F, visual=visual, process=False)
+        return mesh.export(file_type="glb")
+    centre = (lo + hi) / 2
+    mesh = trimesh.Trimesh(vertices=V - centre, faces=F, visual=visual, process=False)
+    transform = np.eye(4)
+    transform[:3, 3] = centre
+    scene = trimesh.Scene()
+    scene.add_geometry(mesh, transform=transform)
+    return scene.export(file_type="glb", tree_postprocessor=_matrix_to_translation)
+
+
+def _matrix_to_translation(tree: dict) -> None:
+    """glTF nodes whose ``matrix`` only translates get a ``translation`` instead (in place)."""
+    for node in tree.get("nodes", []):
+        if "matrix" not in node:
+            continue
+        M = np.asarray(node["matrix"], dtype=np.float64).reshape(4, 4).T  # column-major
+        if np.array_equal(M[:3, :3], np.eye(3)) and np.array_equal(M[3], [0, 0, 0, 1]):
+            del node["matrix"]
+            node["translation"] = M[:3, 3].tolist()
 
 
 @contextlib.contextmanager
