@@ -359,6 +359,7 @@ def resting(bottom, cols, sky, sky_min, top, count, samples):  # pragma: no cove
         probe[n_probe] = c
         n_probe += 1
     found = 0
+    hint = 0
     n_pos = width - cols + 1
     j = -1
     while j + 1 < n_pos:
@@ -371,12 +372,20 @@ def resting(bottom, cols, sky, sky_min, top, count, samples):  # pragma: no cove
             if low - bottom[lowest_col] > limit:
                 j += _SKY_BLOCK - 1
                 continue
+        # the column that lifted the last position too high is, one column over, the likeliest
+        # to lift this one too: test it first
         lift = 0
+        if hint > 0:
+            lift = max(sky[j + hint - 1] - bottom[hint - 1], 0)
+            if lift > limit:
+                hint -= 1
+                continue
         for t in range(n_probe):
             v = sky[j + probe[t]] - bottom[probe[t]]
             if v > lift:
                 lift = v
                 if lift > limit:
+                    hint = probe[t]
                     break
         if lift > limit:
             continue
@@ -385,6 +394,7 @@ def resting(bottom, cols, sky, sky_min, top, count, samples):  # pragma: no cove
             if v > lift:
                 lift = v
                 if lift > limit:
+                    hint = c
                     break
         if lift > limit:
             continue
