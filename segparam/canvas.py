@@ -528,8 +528,14 @@ def trial(
             side = max(side, int(np.floor(ext[e, 0] * s + 2 * margin)) + 1)
             side = max(side, int(np.floor(ext[e, 1] * s + 2 * margin)) + 1)
         n_or = (e1 - e0) * turns
-        bases = np.zeros((e1 - e0, side, side), dtype=np.bool_)
+        # every angle's footprint in one flat buffer (a C-contiguous block each)
         base_shape = np.zeros((e1 - e0, 2), dtype=np.int64)
+        base_off = np.zeros(e1 - e0 + 1, dtype=np.int64)
+        for e in range(e0, e1):
+            base_shape[e - e0, 0] = int(np.floor(ext[e, 1] * s + 2 * margin)) + 1
+            base_shape[e - e0, 1] = int(np.floor(ext[e, 0] * s + 2 * margin)) + 1
+            base_off[e - e0 + 1] = base_off[e - e0] + base_shape[e - e0, 0] * base_shape[e - e0, 1]
+        flat = np.zeros(base_off[e1 - e0], dtype=np.bool_)
         bottoms = np.empty((n_or, side), dtype=np.int64)
         shape = np.zeros((n_or, 2), dtype=np.int64)
         cy = np.zeros(n_or)
@@ -537,21 +543,18 @@ def trial(
         n_kept = 0
         for e in range(e0, e1):
             a = e - e0
-            n0 = int(np.floor(ext[e, 0] * s + 2 * margin)) + 1
-            n1 = int(np.floor(ext[e, 1] * s + 2 * margin)) + 1
+            n1, n0 = base_shape[a, 0], base_shape[a, 1]
             off0 = (n0 - ext[e, 0] * s) / 2
             off1 = (n1 - ext[e, 1] * s) / 2
             P = np.empty((q_ptr[e + 1] - q_ptr[e], 2))
             for v in range(P.shape[0]):
                 P[v, 0] = Q[q_ptr[e] + v, 0] * s + off0
                 P[v, 1] = Q[q_ptr[e] + v, 1] * s + off1
-            base = bases[a, :n1, :n0]
+            base = flat[base_off[a] : base_off[a + 1]].reshape((n1, n0))
             if fill[i]:
                 _fill_into(P, El, eps, base)
             else:
                 _raster_into(P, El, eps, base)
-            base_shape[a, 0] = n1
-            base_shape[a, 1] = n0
             low, high, left, right, cy0, cx0 = _profiles(base, n1, n0)
             first = n_kept
             for k in range(turns):
@@ -575,7 +578,7 @@ def trial(
                 n_kept += 1
         # turned masks are written out only for the orientations that are tried
         n_slots = min(n_kept, n_starts) if rule == REST else n_kept
-        masks = np.zeros((n_slots, side, side), dtype=np.bool_)
+        masks = np.empty((n_slots, side, side), dtype=np.bool_)  # `turned` writes [:r, :c]
         slot = np.full(n_kept, -1, dtype=np.int64)
         used = 0
         # starting points (orientation, row, col), in the order they are tried
@@ -618,7 +621,9 @@ def trial(
             n_s = 0
             for o in range(n_kept):
                 a = ident[o, 0]
-                turned(bases[a], base_shape[a, 0], base_shape[a, 1], ident[o, 1], masks[o])
+                r0, c0 = base_shape[a, 0], base_shape[a, 1]
+                base = flat[base_off[a] : base_off[a + 1]].reshape((r0, c0))
+                turned(base, r0, c0, ident[o, 1], masks[o])
                 slot[o] = o
                 runs, cr, cc = coarse_runs(masks[o], shape[o, 0], shape[o, 1], block)
                 got, rr, cols = holes(prefix, max_free, runs, cr, cc, n_candidates)
@@ -636,7 +641,9 @@ def trial(
             o, row, col = s_or[g], s_row[g], s_col[g]
             if slot[o] < 0:
                 a = ident[o, 0]
-                turned(bases[a], base_shape[a, 0], base_shape[a, 1], ident[o, 1], masks[used])
+                r0, c0 = base_shape[a, 0], base_shape[a, 1]
+                base = flat[base_off[a] : base_off[a + 1]].reshape((r0, c0))
+                turned(base, r0, c0, ident[o, 1], masks[used])
                 slot[o] = used
                 used += 1
             mask = masks[slot[o]]
