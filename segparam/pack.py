@@ -1,4 +1,4 @@
-"""Stage 6: pack the charts into the unit square.
+"""Pack the charts into the unit square (the pipeline's pack stage).
 
 Every chart arrives mapped bijectively to the plane, at an arbitrary position, scale and rotation.
 This stage
@@ -10,60 +10,27 @@ This stage
    are `padding` empty texels apart from each other and from the border;
 4. maximizes the one global scale for which that placement exists, and reports the utilization.
 
-Two placement methods are offered:
+Two methods:
 
 ``"raster"`` (default)
-    Packs the charts' real shapes. Each chart is rasterized conservatively (every texel that a
-    triangle touches is occupied; for a chart without flipped triangles this is computed from its
-    outline and a winding-number fill, texel for texel the same as rasterizing every triangle and
-    3.5x faster on the brain charts). Charts are placed largest first, each where the centroid of
-    its footprint ends up lowest ("lowest gravity centre"), avoiding the placed footprints
-    dilated by `padding`. Two placement rules propose the positions:
-
-    ``"rest"``
-        The chart comes straight down onto the skyline of the placed footprints, in any of
-        ``4 * angle_steps`` orientations (default: steps of 15 degrees) unless it is a rectangle
-        (its convex hull fills 95% of its minimum-area box: quarter turns only). Computed per
-        orientation as a max-plus correlation of the skyline with the footprint's lower profile
-        (by branch and bound on a sampled bound); the best starts are slid down and left texel
-        by texel while they fit.
-    ``"holes"``
-        Quarter turns only, but anywhere there is room, also under overhangs and inside other
-        charts' concavities: the lowest fitting position of every column of a coarse grid (about
-        342 cells a side, 3 texels per cell at 1024), found by FFT correlation on a band of rows
-        just above the filled part, the best few refined the same way.
-
-    A trial packs the charts at one scale with one rule; a scale fits when either rule fits
-    (the first trial runs both, then the rule that needed less height goes first and the other
-    one runs only when the first overshot by at most 5%). The global scale is found by a
-    safeguarded secant search on the height a trial needs.
+    Packs the charts' real shapes: conservative footprints (every texel a triangle touches,
+    `segparam.raster`), placed largest first, each where the centroid of its footprint ends up
+    lowest, avoiding the placed footprints dilated by `padding`. Two placement rules propose
+    positions (`segparam.canvas`, where the texel work of a whole trial is one compiled call):
+    ``"rest"`` drops the chart onto the skyline of the placed footprints in ``4 * angle_steps``
+    orientations (quarter turns only for rectangles, i.e. charts whose convex hull fills 95% of
+    their minimum-area box, and for footprints under `_MIN_TURNING_SIDE` texels); ``"holes"``
+    finds the lowest fitting positions anywhere on a coarse grid, also under overhangs and inside
+    other charts' concavities, in quarter turns. Round, similar-sized charts (organic surfaces)
+    need the fine turns; small charts need the holes. At every scale tried both rules run side by
+    side and the layout that needs less height wins.
 ``"rect"``
-    Packs the padded bounding boxes of the footprints with the MaxRects packer of `rectpack`,
-    with the same search on the global scale.
+    Packs the padded bounding boxes of the footprints with the MaxRects packer of `rectpack`.
 
-Why two rules (``benchmarks/bench_pack.py`` and saved chart sets of the default pipeline,
-remeshing off, 1024 texels, padding 2). Similar-sized, rounded charts (the segmenter's charts
-of organic surfaces) pack like coins: what they need is to turn until their outline matches the
-neighbours'. With the "holes" rule alone, eight brain-like 100k-face surfaces (37-53 charts)
-packed at 0.671-0.692 (mean 0.684); finer rotations in that rule raised the mean to 0.685 (45
-degrees), 0.694 (22.5), 0.708 (15) and 0.710 (11.25 degrees), at 2-8x the time, as its FFT
-search runs per orientation. The skyline search costs far less per orientation, and with it the
-same eight atlases pack at 0.700-0.717 (mean 0.708). Alone, though, it loses the holes that
-small charts fill: the 50-chart synthetic sets (log-uniform sizes) drop from 0.757/0.752 to
-0.691/0.730 and the CAD plate from 0.716 to 0.658. Trying both per scale comes within the
-search's noise of the better rule on every set measured (plate 0.716, synthetic 0.757/0.752, the
-wavy sheet's 68 charts 0.646 -> 0.689, torus 0.575 -> 0.640; brains: mean 0.708 as with "rest"
-alone, seed 0 0.707 against 0.697, seed 5 0.705 against 0.717), at 1.5-2x the time of one rule.
-Measured and not kept: candidates from both rules under the one lowest-centroid ranking (plate
-0.686, synthetic 0.718), ranking by contact with the placed charts (0.678 on the brains), a
-coarse skyline (-0.5 points), running the second rule only when the first rule's last trial
-predicts a fit (misses fits: the layouts vary by 2-4% from one scale to the next).
-
-Before these rules (one rule, quarter turns): ranking positions by the skyline area they waste
-(much worse), a look-ahead placing whichever of the next 4-8 charts sits lowest (0.63: it spends
-the small charts early), packing five orders and keeping the best (+1.5 points at 3x the time).
-
-Measured with ``benchmarks/bench_pack.py`` (padding 2, 1024 texels): see BENCHMARKS.md, section 4.
+The global scale is found by a safeguarded secant search on the height a trial needs (a trial
+places every chart on a canvas half again as tall as the texture and reports the height it
+used). What was measured, kept and rejected along the way is in BENCHMARKS.md, section 4
+(``benchmarks/bench_pack.py``).
 
 Conventions: a texel ``(i, j)`` of a ``resolution x resolution`` texture covers
 ``[j, j + 1] x [i, i + 1] / resolution`` in uv, i.e. occupancy grids are indexed ``[row = v,
@@ -105,38 +72,40 @@ _METHODS = ("raster", "rect")
 _PACK_EPS = 1e-4
 # Each chart is centred in its footprint box with at least this margin (texels) on every side.
 _MARGIN = 1e-3
-# The raster packer searches positions on a grid of about this many cells per side.
+# The "holes" rule searches positions on a grid of about this many cells per side (3 texels a
+# cell at 1024), then slides the best ones texel by texel.
 _COARSE_CELLS = 342
-# Coarse rows added to twice the tallest footprint in a band of the position search.
-_BAND_EXTRA = 8
-# Fewest coarse rows of a band (small footprints would otherwise climb in many thin bands).
-_BAND_MIN = 64
-# Candidate positions (in order of preference) refined texel by texel, per orientation.
+# Candidate positions of the "holes" rule, per orientation, that are slid and ranked.
 _CANDIDATES = 4
-# The resting rule: lowest resting positions kept per orientation, and the best starting
-# points (over all orientations) that are slid and ranked.
+# The "rest" rule: lowest resting positions kept per orientation, and the best starting points
+# (over all orientations) that are slid and ranked.
 _RESTING_PER_ORIENTATION = 2
 _RESTING_STARTS = 8
-# Footprint columns tested first at each position of the resting search.
+# Footprint columns the resting search tests first at each position (spread over the footprint).
 _SKY_SAMPLES = 16
+# Most one-texel moves of a slide (down, then left, while the footprint fits).
+_SLIDE_STEPS = 1024
 # A chart whose convex hull fills at least this much of its minimum-area box is a rectangle for
 # the packer: it only turns by quarter turns.
 _BOXY = 0.95
+# Footprints whose longest side is shorter than this (texels) turn by quarter turns only: at 24,
+# 2,000 triangles pack 23% faster and 300 spheres' halves 48% faster, for -0.5 / -0.05 points
+# (BENCHMARKS.md, section 4); 48 cost the spheres 1.9 points.
+_MIN_TURNING_SIDE = 24
 # Placement rules of the raster packer; every trial runs all of them (side by side), and on a
 # tie in height the first one wins.
 _RULE_ORDER = ("rest", "holes")
-_SLIDE_STEPS = 1024
-# Footprints whose longest side is shorter than this (texels) turn by quarter turns only.
-_MIN_TURNING_SIDE = 24
-# The canvas of a trial is taller than the texture by 1/_HEADROOM, so that an over-full trial
-# still reports the height it needed.
-_HEADROOM = 2
 _RULE_CODES = {"rest": canvas.REST, "holes": canvas.HOLES}
-# Scale search: relative precision on the global scale and the maximum number of trial packings.
+# A trial's canvas is taller than the texture by 1/_HEADROOM of it, so that an over-full trial
+# still places every chart and reports the height it needed (the next guess of the scale).
+_HEADROOM = 2
+# Scale search: relative precision on the global scale and the maximum number of trial packings
+# (5 trials cost brain-20k 0.55 points, 4 trials 1.1 points), the first guess as a fraction of
+# the area bound, and the most trials of a rectangle packing that keeps failing.
 _SCALE_TOL = 0.006
 _MAX_TRIALS = 6
-_MAX_SHRINK = 60
 _FIRST_GUESS = 0.88
+_MAX_SHRINK = 60
 _RECT_ALGOS = ("MaxRectsBssf",)
 
 
