@@ -177,7 +177,8 @@ def _same_turns(base, rows, cols, k1, k2):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def new_canvas(width, height, pad, block):  # pragma: no cover - compiled
-    """Empty canvas arrays: (forbid, sky, coarse, prefix, max_free); see the module docstring."""
+    """Empty canvas arrays: (forbid, sky, coarse, prefix, max_free, free_bits); see the module
+    docstring."""
     forbid = np.ones((height, width), dtype=np.bool_)
     for i in range(pad, height - pad):
         for j in range(pad, width - pad):
@@ -191,14 +192,17 @@ def new_canvas(width, height, pad, block):  # pragma: no cover - compiled
     coarse = np.zeros((nr, nc), dtype=np.bool_)
     prefix = np.zeros((nr, nc + 1), dtype=np.int32)
     max_free = np.zeros(nr, dtype=np.int64)
-    _pool_rows(forbid, block, coarse, prefix, max_free, 0, nr, 0, nc)
-    return forbid, sky, coarse, prefix, max_free
+    free_bits = np.zeros((nr, (nc + 63) // 64 + 1), dtype=np.uint64)  # a zero word past the end
+    _pool_rows(forbid, block, coarse, prefix, max_free, free_bits, 0, nr, 0, nc)
+    return forbid, sky, coarse, prefix, max_free, free_bits
 
 
 @njit(cache=True, nogil=True)
-def _pool_rows(forbid, block, coarse, prefix, max_free, r0, r1, c0, c1):  # pragma: no cover
+def _pool_rows(
+    forbid, block, coarse, prefix, max_free, free_bits, r0, r1, c0, c1
+):  # pragma: no cover - compiled
     """Recompute coarse cells [r0, r1) x [c0, c1) from `forbid` (texels past its edge count as
-    forbidden), and the prefix sums and longest free runs of those rows."""
+    forbidden), and the prefix sums, longest free runs and free-cell bit sets of those rows."""
     height, width = forbid.shape
     nc = coarse.shape[1]
     for R in range(r0, r1):
@@ -214,10 +218,14 @@ def _pool_rows(forbid, block, coarse, prefix, max_free, r0, r1, c0, c1):  # prag
             coarse[R, C] = hit
         run = 0
         best = 0
+        for w in range(free_bits.shape[1]):
+            free_bits[R, w] = 0
         for C in range(nc):
             prefix[R, C + 1] = prefix[R, C] + (1 if coarse[R, C] else 0)
             run = 0 if coarse[R, C] else run + 1
             best = max(best, run)
+            if not coarse[R, C]:
+                free_bits[R, C >> 6] |= np.uint64(1) << np.uint64(C & 63)
         max_free[R] = best
 
 
@@ -294,7 +302,7 @@ def slide(forbid, mask, rows, cols, row, col, max_steps):  # pragma: no cover - 
 
 @njit(cache=True, nogil=True)
 def place(
-    forbid, sky, coarse, prefix, max_free, block, mask, rows, cols, row, col, pad
+    forbid, sky, coarse, prefix, max_free, free_bits, block, mask, rows, cols, row, col, pad
 ):  # pragma: no cover - compiled
     """Forbid the footprint dilated by `pad`, raise the skyline to its top, refresh the pool."""
     grown = dilate_kernel(mask[:rows, :cols], pad)
@@ -321,7 +329,7 @@ def place(
     R1 = min((min(r0 + grown.shape[0], H) + block - 1) // block, coarse.shape[0])
     C0 = max(c0, 0) // block
     C1 = min((min(c0 + grown.shape[1], W) + block - 1) // block, coarse.shape[1])
-    _pool_rows(forbid, block, coarse, prefix, max_free, R0, R1, C0, C1)
+    _pool_rows(forbid, block, coarse, prefix, max_free, free_bits, R0, R1, C0, C1)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -447,14 +455,34 @@ def coarse_runs(mask, rows, cols, block):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def holes(prefix, max_free, runs, cr, cc, count):  # pragma: no cover - compiled
+def _runs_of(bits, row, length, out):  # pragma: no cover - compiled
+    """Bit p of `out`: coarse cells p .. p + length - 1 of the row are all free (word-wise)."""
+    n_words = bits.shape[1]
+    for w in range(n_words):
+        out[w] = bits[row, w]
+    have = 1
+    while have < length:
+        step = min(have, length - have)
+        q, r = step >> 6, step & 63
+        for w in range(n_words):  # out &= out >> step, words in increasing order
+            lo = out[w + q] if w + q < n_words else np.uint64(0)
+            if r:
+                hi = out[w + q + 1] if w + q + 1 < n_words else np.uint64(0)
+                lo = (lo >> np.uint64(r)) | (hi << np.uint64(64 - r))
+            out[w] &= lo
+        have += step
+
+
+@njit(cache=True, nogil=True)
+def holes(prefix, max_free, free_bits, runs, cr, cc, count):  # pragma: no cover - compiled
     """Per coarse column the lowest coarse row where the coarse footprint meets no forbidden
     cell; of those, the `count` lowest (then left-most). Returns (found, rows, cols).
 
     These are the first `count` fitting positions in row-major order (a column's first fit
     is its lowest), so rows are scanned upwards and the scan stops at the `count`-th fit.
-    Rows whose longest free run is shorter than the footprint's widest run are skipped; a
-    position is tested run by run (widest first) with the row prefix sums.
+    Rows whose longest free run is shorter than the footprint's widest run are skipped; in the
+    others, the columns where that run fits come from the row's free-cell bits (64 cells a
+    word), and only those positions are tested run by run with the row prefix sums.
     """
     nr = prefix.shape[0]
     nc = prefix.shape[1] - 1
@@ -465,27 +493,36 @@ def holes(prefix, max_free, runs, cr, cc, count):  # pragma: no cover - compiled
     iw, w0, w1 = runs[0, 0], runs[0, 1], runs[0, 2]
     ww = w1 - w0 + 1
     taken = np.zeros(nc, dtype=np.bool_)
+    starts = np.empty(free_bits.shape[1], dtype=np.uint64)
     found = 0
     for y in range(nr - cr + 1):
-        if max_free[y + iw] < ww:
-            continue
         R = y + iw
-        for j in range(nc - cc + 1):
-            if taken[j] or prefix[R, j + w1 + 1] != prefix[R, j + w0]:
-                continue
-            ok = True
-            for u in range(1, len(runs)):
-                Ru = y + runs[u, 0]
-                if prefix[Ru, j + runs[u, 2] + 1] != prefix[Ru, j + runs[u, 1]]:
-                    ok = False
-                    break
-            if ok:
-                taken[j] = True
-                out_r[found] = y
-                out_c[found] = j
-                found += 1
-                if found == count:
-                    return found, out_r, out_c
+        if max_free[R] < ww:
+            continue
+        _runs_of(free_bits, R, ww, starts)
+        for w in range(len(starts)):
+            word = starts[w]
+            while word:
+                bit = 0
+                while not (word >> np.uint64(bit)) & np.uint64(1):
+                    bit += 1
+                word &= word - np.uint64(1)  # clear the lowest set bit
+                j = w * 64 + bit - w0  # the position whose widest run starts at this cell
+                if j < 0 or j > nc - cc or taken[j]:
+                    continue
+                ok = True
+                for u in range(1, len(runs)):
+                    Ru = y + runs[u, 0]
+                    if prefix[Ru, j + runs[u, 2] + 1] != prefix[Ru, j + runs[u, 1]]:
+                        ok = False
+                        break
+                if ok:
+                    taken[j] = True
+                    out_r[found] = y
+                    out_c[found] = j
+                    found += 1
+                    if found == count:
+                        return found, out_r, out_c
     return found, out_r, out_c
 
 
@@ -510,7 +547,7 @@ def trial(
     chart (angle entry, quarter turns, row, col, footprint rows, footprint cols); the texture
     side the layout needs (top-most footprint row + 1 + pad).
     """
-    forbid, sky, coarse, prefix, max_free = new_canvas(width, height, pad, block)
+    forbid, sky, coarse, prefix, max_free, free_bits = new_canvas(width, height, pad, block)
     sky_min = np.empty((width + _SKY_BLOCK - 1) // _SKY_BLOCK, dtype=np.int64)
     _sky_minima(sky, sky_min, 0, width)
     result = np.full((len(entry_ptr) - 1, 6), -1, dtype=np.int64)
@@ -626,7 +663,7 @@ def trial(
                 turned(base, r0, c0, ident[o, 1], masks[o])
                 slot[o] = o
                 runs, cr, cc = coarse_runs(masks[o], shape[o, 0], shape[o, 1], block)
-                got, rr, cols = holes(prefix, max_free, runs, cr, cc, n_candidates)
+                got, rr, cols = holes(prefix, max_free, free_bits, runs, cr, cc, n_candidates)
                 for g in range(got):
                     s_or[n_s] = o
                     s_row[n_s] = rr[g] * block
@@ -658,7 +695,8 @@ def trial(
             return t, result, need
         r, c = shape[best_o, 0], shape[best_o, 1]
         place(
-            forbid, sky, coarse, prefix, max_free, block, masks[slot[best_o]], r, c, best_row,
+            forbid, sky, coarse, prefix, max_free, free_bits, block, masks[slot[best_o]], r, c,
+            best_row,
             best_col, pad,
         )
         _sky_minima(sky, sky_min, best_col - pad, best_col + c + pad)

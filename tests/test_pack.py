@@ -252,7 +252,7 @@ def test_boundary_edges_refuses_meshes_the_fill_cannot_handle() -> None:
 def _canvas_with_blobs(width: int, height: int, pad: int, seed: int, rule: str):
     """A canvas (block 1) with six random blobs placed by one rule's search, and its state."""
     rng = np.random.default_rng(seed)
-    forbid, sky, coarse, prefix, max_free = canvas.new_canvas(width, height, pad, 1)
+    forbid, sky, coarse, prefix, max_free, bits = canvas.new_canvas(width, height, pad, 1)
     sky_min = np.empty(-(-width // canvas._SKY_BLOCK), dtype=np.int64)
     canvas._sky_minima(sky, sky_min, 0, width)
     for _ in range(6):
@@ -261,7 +261,7 @@ def _canvas_with_blobs(width: int, height: int, pad: int, seed: int, rule: str):
         r, c = blob.shape
         if rule == "holes":
             runs, cr, cc = canvas.coarse_runs(blob, r, c, 1)
-            got, rows, cols = canvas.holes(prefix, max_free, runs, cr, cc, 1)
+            got, rows, cols = canvas.holes(prefix, max_free, bits, runs, cr, cc, 1)
         else:
             bottom = np.where(blob.any(axis=0), np.argmax(blob, axis=0), canvas._EMPTY)
             got, rows, cols = canvas.resting(
@@ -269,9 +269,9 @@ def _canvas_with_blobs(width: int, height: int, pad: int, seed: int, rule: str):
             )
         if got:
             row, col = canvas.slide(forbid, blob, r, c, int(rows[0]), int(cols[0]), 1024)
-            canvas.place(forbid, sky, coarse, prefix, max_free, 1, blob, r, c, row, col, pad)
+            canvas.place(forbid, sky, coarse, prefix, max_free, bits, 1, blob, r, c, row, col, pad)
             canvas._sky_minima(sky, sky_min, 0, width)
-    return forbid, sky, sky_min, prefix, max_free
+    return forbid, sky, sky_min, prefix, max_free, bits
 
 
 def _fits(forbid, mask, row, col) -> bool:
@@ -282,7 +282,7 @@ def _fits(forbid, mask, row, col) -> bool:
 def test_candidates_are_the_lowest_fitting_positions_per_column() -> None:
     # with one texel per coarse cell the hole search must return exactly the lowest fitting
     # row of each column (brute force below), lowest first
-    forbid, _, _, prefix, max_free = _canvas_with_blobs(64, 72, 1, 0, "holes")
+    forbid, _, _, prefix, max_free, bits = _canvas_with_blobs(64, 72, 1, 0, "holes")
     fp = np.tri(9, 14, 4, dtype=bool)
     r, c = fp.shape
     lowest = {}
@@ -292,19 +292,40 @@ def test_candidates_are_the_lowest_fitting_positions_per_column() -> None:
                 lowest[col] = row
                 break
     runs, cr, cc = canvas.coarse_runs(fp, r, c, 1)
-    got, rows, cols = canvas.holes(prefix, max_free, runs, cr, cc, 10**4)
+    got, rows, cols = canvas.holes(prefix, max_free, bits, runs, cr, cc, 10**4)
     assert got, "the canvas still has room"
     rows, cols = rows[:got].tolist(), cols[:got].tolist()
     assert rows == sorted(rows) and rows[0] == min(lowest.values())
     assert dict(zip(cols, rows, strict=True)) == lowest
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_free_run_starts_from_bit_sets_match_brute_force(seed: int) -> None:
+    # the hole search finds where a run of free cells fits from 64-cell words, with shifts that
+    # cross word boundaries; check it against a direct scan on rows of 300 cells
+    rng = np.random.default_rng(seed)
+    nc = 300
+    free = rng.random((4, nc)) < rng.uniform(0.7, 0.999, (4, 1))
+    coarse = ~free
+    forbid = coarse.copy()  # one texel per cell
+    _, _, c, prefix, max_free, bits = canvas.new_canvas(nc, 4, 0, 1)
+    canvas._pool_rows(forbid, 1, c, prefix, max_free, bits, 0, 4, 0, nc)
+    out = np.empty(bits.shape[1], dtype=np.uint64)
+    for row in range(4):
+        for length in (1, 2, 5, 63, 64, 65, 130, 200):
+            canvas._runs_of(bits, row, length, out)
+            got = [p for p in range(64 * len(out)) if int(out[p // 64]) >> (p % 64) & 1]
+            want = [p for p in range(nc - length + 1) if free[row, p : p + length].all()]
+            assert got == want
+
+
 def test_coarse_hole_search_never_misses_a_free_coarse_position() -> None:
     # with 3-texel cells a position is reported only where the coarse footprint meets no
     # forbidden cell, and every such position of the lowest row is reported
-    forbid, _, _, _, _ = _canvas_with_blobs(96, 108, 1, 3, "holes")
-    _, _, coarse, prefix, max_free = canvas.new_canvas(96, 108, 1, 3)
-    canvas._pool_rows(forbid, 3, coarse, prefix, max_free, 0, coarse.shape[0], 0, coarse.shape[1])
+    forbid = _canvas_with_blobs(96, 108, 1, 3, "holes")[0]
+    _, _, coarse, prefix, max_free, bits = canvas.new_canvas(96, 108, 1, 3)
+    nr, nc = coarse.shape
+    canvas._pool_rows(forbid, 3, coarse, prefix, max_free, bits, 0, nr, 0, nc)
     fp = np.tri(10, 16, 5, dtype=bool)
     runs, cr, cc = canvas.coarse_runs(fp, *fp.shape, 3)
     cfp = np.zeros((cr, cc), dtype=bool)
@@ -316,7 +337,7 @@ def test_coarse_hole_search_never_misses_a_free_coarse_position() -> None:
         for j in range(coarse.shape[1] - cc + 1)
         if not (coarse[y : y + cr, j : j + cc] & cfp).any()
     }
-    got, rows, cols = canvas.holes(prefix, max_free, runs, cr, cc, 10**4)
+    got, rows, cols = canvas.holes(prefix, max_free, bits, runs, cr, cc, 10**4)
     found = set(zip(rows[:got].tolist(), cols[:got].tolist(), strict=True))
     assert found <= free
     lowest = min(y for y, _ in free)
@@ -462,7 +483,7 @@ def test_resting_positions_are_the_lowest_drop_positions() -> None:
     # a footprint "rests" at (row, col) when it can come straight down from the top to there:
     # it fits at that row and at every row above. The skyline search must return, per column,
     # the lowest such row (brute force below), lowest first.
-    forbid, sky, sky_min, _, _ = _canvas_with_blobs(64, 72, 1, 1, "rest")
+    forbid, sky, sky_min, _, _, _ = _canvas_with_blobs(64, 72, 1, 1, "rest")
     fp = np.tri(9, 14, 4, dtype=bool)[::-1].copy()
     r, c = fp.shape
     top = 72 - 1 - r  # highest row inside the top border
