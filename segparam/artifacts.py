@@ -15,25 +15,76 @@ from typing import Any
 import numpy as np
 
 from .errors import MeshFileError
-from .io import atomic_path
+from .io import atomic_path, check_output_files
 from .quality import chart_quality
 from .split import Chart, ChartSet
 
-__all__ = ["load_stage", "save_stage", "charts_to_arrays", "charts_from_arrays"]
+__all__ = [
+    "charts_from_arrays",
+    "charts_to_arrays",
+    "check_stage_output",
+    "load_stage",
+    "save_stage",
+    "stage_paths",
+]
+
+
+def stage_paths(path: str | os.PathLike) -> tuple[Path, Path]:
+    """The two files of a stage artifact: ``path`` with the suffix ``.npz``, and its ``.json``.
+
+    Raises
+    ------
+    MeshFileError
+        ``path`` names a folder (``-o .``, ``-o out/``, an existing folder) rather than a file.
+    """
+    raw = os.fspath(path)
+    path = Path(raw)
+    folder = raw.endswith(("/", os.sep)) or os.path.isdir(path)
+    if folder or not path.name or path.name in (".", ".."):
+        raise MeshFileError(f"{raw}: is a folder; give the artifact a file name (NAME.npz)")
+    if path.suffix != ".npz":
+        path = path.with_suffix(".npz")
+    return path, path.with_suffix(".json")
+
+
+def check_stage_output(
+    path: str | os.PathLike, *, inputs: tuple[str | os.PathLike, ...] = ()
+) -> Path:
+    """Check, before any work, that a stage artifact can be written at ``path`` (its folder is
+    writable, the names fit, neither file is one of ``inputs``). Returns the ``.npz`` path.
+
+    Raises
+    ------
+    MeshFileError
+        One line naming the path and the problem.
+    """
+    npz, js = stage_paths(path)
+    check_output_files([npz, js], inputs=inputs)
+    return npz
 
 
 def save_stage(
     path: str | os.PathLike, arrays: dict[str, np.ndarray], info: dict[str, Any]
 ) -> Path:
-    """Write ``path`` (.npz) and the JSON beside it, each atomically. Returns the npz path."""
-    path = Path(path)
-    if path.suffix != ".npz":
-        path = path.with_suffix(".npz")
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **arrays)
-    with atomic_path(path.with_suffix(".json")) as tmp:
-        tmp.write_text(json.dumps(info, indent=1) + "\n", encoding="utf-8")
+    """Write ``path`` (.npz) and the JSON beside it, each atomically. Returns the npz path.
+
+    Raises
+    ------
+    MeshFileError
+        The location cannot take the files (:func:`check_stage_output`) or writing failed.
+    """
+    path = check_stage_output(path)
+    try:
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **arrays)
+        with atomic_path(path.with_suffix(".json")) as tmp:
+            tmp.write_text(json.dumps(info, indent=1) + "\n", encoding="utf-8")
+    except MeshFileError:
+        raise
+    except OSError as exc:
+        why = exc.strerror or str(exc)
+        raise MeshFileError(f"{path}: cannot write the stage artifact: {why}") from None
     return path
 
 

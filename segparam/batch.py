@@ -65,6 +65,11 @@ SUMMARY_FIELDS = (
     "reason",
 )
 
+#: Most worker processes of a local cluster (``--workers``).
+MAX_WORKERS = 4096
+#: The files the batch writes into OUTDIR itself.
+SUMMARY_FILES = ("summary.csv", "summary.json")
+
 _MISSING_DASK = "segparam batch needs Dask: pip install 'segparam[batch]'"
 _GLOB_CHARS = frozenset("*?[")
 
@@ -84,8 +89,9 @@ def _import_dask() -> Any:
 
 def _mesh_stem(path: Path) -> str:
     """The file name without its mesh suffix (``lh.pial.gii.gz`` -> ``lh.pial``)."""
-    name = path.name
-    return name[: -len(".gii.gz")] if name.lower().endswith(".gii.gz") else path.stem
+    from .io import mesh_stem
+
+    return mesh_stem(path)
 
 
 def _is_mesh_file(path: Path) -> bool:
@@ -163,20 +169,25 @@ def expand_inputs(
     return paths
 
 
-def assign_folders(paths: Iterable[Path]) -> list[str]:
+def assign_folders(paths: Iterable[Path], *, limit: int | None = None) -> list[str]:
     """One output folder name per input: its stem, then ``<stem>-2``, ``<stem>-3``... on clashes.
 
     Names are compared case-insensitively (macOS and Windows filesystems) and given in input
-    order, so sorted inputs always get the same names.
+    order, so sorted inputs always get the same names. A name longer than ``limit`` bytes
+    (default: 255, the usual file-system limit) keeps the beginning of its stem and gets a hash
+    of the whole stem (:func:`segparam.io.fit_name`).
     """
+    from .io import DEFAULT_NAME_MAX, fit_name
+
+    limit = DEFAULT_NAME_MAX if limit is None else limit
     used: set[str] = set()
     names = []
     for path in paths:
         stem = _mesh_stem(Path(path)) or "mesh"
-        name, k = stem, 1
+        name, k = fit_name(stem, limit=limit), 1
         while name.casefold() in used:
             k += 1
-            name = f"{stem}-{k}"
+            name = fit_name(stem, f"-{k}", limit=limit)
         used.add(name.casefold())
         names.append(name)
     return names
@@ -263,7 +274,7 @@ def process_one(
         One summary row (:data:`SUMMARY_FIELDS`): status ``done``, ``skipped`` or ``failed``
         (with the one-line reason: the :class:`SegparamError` message, else ``Type: message``).
     """
-    from .io import atomic_path, load_mesh
+    from .io import atlas_file_names, atlas_stem, atomic_path, check_output_folder, load_mesh
     from .pipeline import build_atlas, config_from_dict
 
     path, folder = Path(path), Path(outdir)
@@ -272,6 +283,9 @@ def process_one(
         skipped = _done_row(path, folder, config_dict, seed)
         if skipped is not None:
             return skipped
+        stem = atlas_stem(_mesh_stem(path), folder)
+        names = [*atlas_file_names(stem).values(), DONE_MARKER]
+        check_output_folder(folder, names, inputs=[path])  # before any work
         # One task per mesh already keeps every worker busy: no process pool inside a task.
         config = config_from_dict(config_dict).replace(split={"n_jobs": 1})
         try:
@@ -281,7 +295,7 @@ def process_one(
         V, F = load_mesh(path)
         atlas = build_atlas(V, F, config, seed=seed)
         (folder / DONE_MARKER).unlink(missing_ok=True)  # an older atlas is being replaced
-        atlas.save(folder, stem=_mesh_stem(path))
+        atlas.save(folder, stem=stem)
         report = json.loads((folder / "report.json").read_text(encoding="utf-8"))["atlas"]
         result = {
             "seconds": round(time.perf_counter() - t0, 3),
@@ -420,16 +434,17 @@ def run_batch(
     KeyboardInterrupt
         After cancelling the tasks, closing the cluster and writing the summaries.
     """
-    from .pipeline import PipelineConfig
+    from .io import check_output_folder, name_max
+    from .pipeline import PipelineConfig, check_seed
 
+    seed = check_seed(seed)
+    outdir = Path(outdir).expanduser().resolve()
+    check_output_folder(outdir, SUMMARY_FILES)  # writable, not a file: before any work
     distributed = _import_dask()
     t_start = time.perf_counter()
     config = config or PipelineConfig()
-    outdir = Path(outdir).expanduser().resolve()
-    if outdir.exists() and not outdir.is_dir():
-        raise SegparamError(f"{outdir}: exists and is not a folder")
     paths = expand_inputs(inputs, recursive=recursive, exclude=outdir)
-    folders = [outdir / name for name in assign_folders(paths)]
+    folders = [outdir / name for name in assign_folders(paths, limit=name_max(outdir))]
     config_dict = config.as_dict()
     report = progress or (lambda row: None)
     meta = {"segparam": __version__, "seed": int(seed), "settings": config_dict}
@@ -503,6 +518,8 @@ def run_batch(
 
 def add_batch_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Add the ``batch`` subcommand (``cmd_batch``) to the CLI's subparsers."""
+    from .cli import add_pipeline_options
+
     p = subparsers.add_parser(
         "batch",
         help="many mesh files -> one atlas folder each, on Dask (local cluster or a scheduler)",
@@ -517,13 +534,13 @@ def add_batch_parser(subparsers: argparse._SubParsersAction) -> argparse.Argumen
     p.add_argument("--recursive", action="store_true", help="look into sub-folders of folders")
     where = p.add_mutually_exclusive_group()
     where.add_argument(
-        "--workers", type=int, help="worker processes of the local cluster (default: CPUs)"
+        "--workers",
+        type=int,
+        help="worker processes of the local cluster, 1 to 4096 (default: CPUs)",
     )
     where.add_argument(
         "--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://host:8786"
     )
-    from .cli import add_pipeline_options
-
     add_pipeline_options(p)
     p.set_defaults(func=cmd_batch)
     return p
@@ -536,10 +553,14 @@ def cmd_batch(args: argparse.Namespace) -> int:
     which the CLI prints as one line with exit code 2.
     """
     from .cli import _config_from_args
+    from .io import check_output_folder
 
-    if args.workers is not None and args.workers < 1:
-        raise SegparamError(f"--workers must be at least 1, not {args.workers}")
+    if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS:
+        raise SegparamError(
+            f"argument --workers: must be from 1 to {MAX_WORKERS}, got {args.workers}"
+        )
     config = _config_from_args(args)
+    check_output_folder(args.output, SUMMARY_FILES)  # before Dask starts or any mesh is read
     _import_dask()
     # Dask's own INFO chatter (scheduler start, workers retired) is noise on a terminal.
     logging.getLogger("distributed").setLevel(logging.WARNING)

@@ -7,14 +7,91 @@ on stderr and the exit code is 2, never a traceback.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
+import math
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 from . import __version__
 from .errors import SegparamError
 
 log = logging.getLogger("segparam")
+
+
+class _UsageError(Exception):
+    """A bad command line (unknown option, a value out of range): one line, exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line like every other error (no usage block)."""
+
+    def error(self, message: str):  # type: ignore[override]
+        raise _UsageError(message)
+
+
+def _integer(low: int, high: int):
+    """An argparse ``type``: an integer in ``[low, high]``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text, 10)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected an integer from {low} to {high}, got {text!r}"
+            ) from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"must be from {low} to {high}, got {value}")
+        return value
+
+    parse.__name__ = "integer"
+    return parse
+
+
+def _number(low: float):
+    """An argparse ``type``: a finite number ``>= low``."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected a number >= {low:g}, got {text!r}"
+            ) from None
+        if not (math.isfinite(value) and value >= low):
+            raise argparse.ArgumentTypeError(f"must be a finite number >= {low:g}, got {text}")
+        return value
+
+    parse.__name__ = "number"
+    return parse
+
+
+# segparam.pipeline.MAX_RESOLUTION and MAX_SEED (not imported: --help stays fast); the tests check
+# that they agree.
+_MAX_RESOLUTION, _MAX_SEED = 16384, 2**32 - 1
+#: ``--seed``: numpy and scikit-learn take 32-bit seeds.
+SEED = _integer(0, _MAX_SEED)
+#: ``--resolution``: texels per side.
+RESOLUTION = _integer(1, _MAX_RESOLUTION)
+#: ``--padding``: texels; below half the resolution (checked with the resolution).
+PADDING = _integer(0, _MAX_RESOLUTION // 2)
+#: ``--max-charts``.
+MAX_CHARTS = _integer(1, 1_000_000)
+#: ``--max-distortion``: an angle distortion s1/s2, 1 at best.
+MAX_DISTORTION = _number(1.0)
+
+
+@contextlib.contextmanager
+def _naming(path: Path) -> Iterator[None]:
+    """Errors raised inside the block name ``path`` (the input file) if they do not already."""
+    try:
+        yield
+    except SegparamError as exc:
+        text = str(exc)
+        if str(path) in text or path.name in text:
+            raise
+        raise type(exc)(f"{path}: {text}") from None
 
 
 def _bundled(folder: str, name: str) -> Path:
@@ -41,16 +118,31 @@ DEFAULT_CHART_NAME = "brain_parcel.obj"
 
 
 def _cmd_chart(args: argparse.Namespace) -> int:
-    from .io import load_mesh, render_uv_layout, staged_outputs, write_obj
+    from .io import (
+        check_output_files,
+        fit_name,
+        load_mesh,
+        mesh_stem,
+        name_max,
+        render_uv_layout,
+        staged_outputs,
+        write_obj,
+    )
     from .parameterize import parameterize_chart
 
     source = Path(args.input) if args.input else _data(DEFAULT_CHART_NAME)
+    if args.output:
+        out = Path(args.output)
+    else:  # <stem>_uv.obj and <stem>_uv_uv.png, the stem shortened if they would be too long
+        limit = name_max(Path.cwd()) - len("_uv_uv.png")
+        out = Path(fit_name(mesh_stem(source), limit=limit) + "_uv.obj")
+    png = out.with_name(out.stem + "_uv.png")
+    check_output_files([out, png], inputs=[source])
     V, F = load_mesh(source)
-    chart = parameterize_chart(V, F, method=args.method, tangent=args.tangent, seed=args.seed)
-    out = Path(args.output) if args.output else Path(source.stem + "_uv.obj")
+    with _naming(source):
+        chart = parameterize_chart(V, F, method=args.method, tangent=args.tangent, seed=args.seed)
     uv = chart.uv - chart.uv.min(axis=0)
     uv = uv / max(float(uv.max()), 1e-300)  # into the unit square, aspect kept
-    png = out.with_name(out.stem + "_uv.png")
     with staged_outputs(out.parent) as stage:  # both files or neither
         write_obj(stage / out.name, V, F, uv=uv)
         render_uv_layout(uv, F).save(stage / png.name, format="PNG")
@@ -110,48 +202,54 @@ def _config_from_args(args: argparse.Namespace):
 
 
 def _cmd_remesh(args: argparse.Namespace) -> int:
-    from .artifacts import save_stage
+    from .artifacts import check_stage_output, save_stage
     from .clean import clean
     from .io import load_mesh
     from .remesh import remesh
 
     config = _config_from_args(args)
+    out = check_stage_output(args.output, inputs=[args.input])
     V, F = load_mesh(args.input)
-    cleaned = clean(V, F)
-    result = remesh(cleaned.V, cleaned.F, config=config.remesh)
+    with _naming(Path(args.input)):
+        cleaned = clean(V, F)
+        result = remesh(cleaned.V, cleaned.F, config=config.remesh)
     info = {
         "stage": "remesh",
         "input": str(args.input),
         "cleaning": cleaned.summary(),
         "remeshing": {"remeshed": result.remeshed, "reason": result.reason},
     }
-    out = save_stage(args.output, {"V": result.V, "F": result.F}, info)
+    out = save_stage(out, {"V": result.V, "F": result.F}, info)
     if not args.quiet:
         print(f"{len(result.F)} faces ({result.reason}); wrote {out}")
     return 0
 
 
 def _cmd_segment(args: argparse.Namespace) -> int:
-    from .artifacts import load_stage, save_stage
+    from .artifacts import check_stage_output, load_stage, save_stage
     from .segment import segment
 
     config = _config_from_args(args)
+    out = check_stage_output(args.output, inputs=[args.input])
     a = load_stage(args.input, needs=("V", "F"))
-    seg = segment(a["V"], a["F"], config=config.segment, seed=args.seed)
+    with _naming(Path(args.input)):
+        seg = segment(a["V"], a["F"], config=config.segment, seed=args.seed)
     info = {"stage": "segment", "charts": seg.n_charts, "curvature": seg.curvature}
-    out = save_stage(args.output, {"V": a["V"], "F": a["F"], "labels": seg.labels}, info)
+    out = save_stage(out, {"V": a["V"], "F": a["F"], "labels": seg.labels}, info)
     if not args.quiet:
         print(f"{seg.n_charts} charts; wrote {out}")
     return 0
 
 
 def _cmd_parameterize(args: argparse.Namespace) -> int:
-    from .artifacts import charts_to_arrays, load_stage, save_stage
+    from .artifacts import charts_to_arrays, check_stage_output, load_stage, save_stage
     from .split import parameterize_charts
 
     config = _config_from_args(args)
+    out = check_stage_output(args.output, inputs=[args.input])
     a = load_stage(args.input, needs=("V", "F", "labels"))
-    cs = parameterize_charts(a["V"], a["F"], a["labels"], config=config.split, seed=args.seed)
+    with _naming(Path(args.input)):
+        cs = parameterize_charts(a["V"], a["F"], a["labels"], config=config.split, seed=args.seed)
     info = {
         "stage": "parameterize",
         "charts": len(cs.charts),
@@ -159,7 +257,7 @@ def _cmd_parameterize(args: argparse.Namespace) -> int:
         "splits": int(cs.splits.sum()),
     }
     arrays = {"V": a["V"], "F": a["F"], **charts_to_arrays(cs)}
-    out = save_stage(args.output, arrays, info)
+    out = save_stage(out, arrays, info)
     if not args.quiet:
         print(f"{len(cs.charts)} bijective charts ({info['splits']} splits); wrote {out}")
     return 0
@@ -167,14 +265,18 @@ def _cmd_parameterize(args: argparse.Namespace) -> int:
 
 def _cmd_pack(args: argparse.Namespace) -> int:
     from .artifacts import charts_from_arrays, load_stage
+    from .io import atlas_file_names, atlas_stem, check_output_folder, mesh_stem
     from .pipeline import pack_atlas
 
     config = _config_from_args(args)
-    a = load_stage(args.input, needs=("V", "F", "chart_faces", "chart_uv"))
-    charts = charts_from_arrays(a["V"], a)
-    atlas = pack_atlas(a["V"], a["F"], charts, config=config, seed=args.seed)
-    stem = Path(args.input).stem
-    written = atlas.save(args.output, stem=stem)
+    source, outdir = Path(args.input), Path(args.output)
+    stem = atlas_stem(mesh_stem(source), outdir)
+    check_output_folder(outdir, atlas_file_names(stem).values(), inputs=[source])
+    a = load_stage(source, needs=("V", "F", "chart_faces", "chart_uv"))
+    with _naming(source):
+        charts = charts_from_arrays(a["V"], a)
+        atlas = pack_atlas(a["V"], a["F"], charts, config=config, seed=args.seed)
+    written = atlas.save(outdir, stem=stem)
     if not args.quiet:
         print(f"{atlas.n_charts} charts, utilization {atlas.packing.utilization:.3f}; ", end="")
         print(f"wrote {len(written)} files to {args.output}/")
@@ -184,28 +286,36 @@ def _cmd_pack(args: argparse.Namespace) -> int:
 def _cmd_atlas(args: argparse.Namespace) -> int:
     import time
 
-    from .errors import InvalidMeshError
-    from .io import load_mesh
+    from .io import (
+        atlas_file_names,
+        atlas_stem,
+        check_output_folder,
+        fit_name,
+        load_mesh,
+        mesh_stem,
+        name_max,
+    )
     from .pipeline import build_atlas
 
     source = Path(args.input) if args.input else _data(DEFAULT_MESH_NAME)
-    outdir = Path(args.output) if args.output else Path(f"{source.stem}_atlas")
-    if outdir.exists() and not outdir.is_dir():
-        from .errors import SegparamError
-
-        raise SegparamError(f"{outdir}: exists and is not a folder")
+    stem = mesh_stem(source)
+    if args.output:
+        outdir = Path(args.output)
+    else:
+        outdir = Path(fit_name(stem, "_atlas", limit=name_max(Path.cwd())))
     config = _config_from_args(args)
+    # Everything about the output location, before any work: a run never fails at its end for it.
+    stem = atlas_stem(stem, outdir)
+    check_output_folder(outdir, atlas_file_names(stem).values(), inputs=[source])
     t0 = time.perf_counter()
     V, F = load_mesh(source)
     bar = _progress_bar(args.quiet)
     try:
-        atlas = build_atlas(V, F, config, seed=args.seed, progress=bar.update if bar else None)
-    except InvalidMeshError as exc:
-        raise InvalidMeshError(f"{source}: {exc}") from None
+        with _naming(source):
+            atlas = build_atlas(V, F, config, seed=args.seed, progress=bar.update if bar else None)
     finally:
         if bar:
             bar.close()
-    stem = source.name[: -len(".gii.gz")] if source.name.endswith(".gii.gz") else source.stem
     written = atlas.save(outdir, stem=stem)
     if not args.quiet:
         r = atlas.report()
@@ -273,18 +383,20 @@ def _progress_bar(quiet: bool) -> _StageBar | None:
 def add_pipeline_options(p: argparse.ArgumentParser) -> None:
     """The options shared by ``atlas`` and ``batch`` (read back by :func:`_config_from_args`)."""
     p.add_argument("--config", help="pipeline TOML file, or a bundled name: default, brain, fast")
-    p.add_argument("--resolution", type=int, help="texture size in texels (default 1024)")
-    p.add_argument("--padding", type=int, help="texels between charts and at the border (2)")
+    p.add_argument(
+        "--resolution", type=RESOLUTION, help="texture size in texels, 1 to 16384 (default 1024)"
+    )
+    p.add_argument("--padding", type=PADDING, help="texels between charts and at the border (2)")
     p.add_argument("--remesh", choices=["auto", "on", "off"], help="remeshing policy (auto)")
     p.add_argument("--no-remesh", action="store_true", help="keep the input's vertices")
-    p.add_argument("--max-charts", type=int, help="most charts from the segmentation")
-    p.add_argument("--max-distortion", type=float, help="split charts above this s1/s2")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--max-charts", type=MAX_CHARTS, help="most charts from the segmentation")
+    p.add_argument("--max-distortion", type=MAX_DISTORTION, help="split charts above this s1/s2")
+    p.add_argument("--seed", type=SEED, default=0, help="0 to 4294967295 (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="segparam", description="Triangle meshes to UV atlases (Hessian eigenfunctions)."
     )
     parser.add_argument("--version", action="version", version=f"segparam {__version__}")
@@ -297,7 +409,7 @@ def build_parser() -> argparse.ArgumentParser:
     chart.add_argument("-o", "--output", help="output OBJ (default: <input stem>_uv.obj)")
     chart.add_argument("--method", choices=["hessian", "classic-hlle"], default="hessian")
     chart.add_argument("--tangent", choices=["normals", "pca"], default="normals")
-    chart.add_argument("--seed", type=int, default=0)
+    chart.add_argument("--seed", type=SEED, default=0, help="0 to 4294967295 (default 0)")
     chart.add_argument("--quiet", action="store_true", help="print nothing on success")
     chart.set_defaults(func=_cmd_chart)
 
@@ -318,7 +430,7 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("input", help=inp)
         p.add_argument("-o", "--output", required=True, help=out)
         p.add_argument("--config", help="pipeline TOML file, or a bundled name")
-        p.add_argument("--seed", type=int, default=0)
+        p.add_argument("--seed", type=SEED, default=0, help="0 to 4294967295 (default 0)")
         p.add_argument("--quiet", action="store_true")
         for flag, kwargs in options:
             p.add_argument(flag, **kwargs)
@@ -341,7 +453,7 @@ def build_parser() -> argparse.ArgumentParser:
         "segment .npz",
         "artifact (.npz)",
         _cmd_parameterize,
-        [("--max-distortion", {"type": float})],
+        [("--max-distortion", {"type": MAX_DISTORTION})],
     )
     stage(
         "pack",
@@ -349,7 +461,7 @@ def build_parser() -> argparse.ArgumentParser:
         "parameterize .npz",
         "output folder",
         _cmd_pack,
-        [("--resolution", {"type": int}), ("--padding", {"type": int})],
+        [("--resolution", {"type": RESOLUTION}), ("--padding", {"type": PADDING})],
     )
     return parser
 
@@ -357,12 +469,20 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``segparam`` console script."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except _UsageError as exc:  # argparse's message, e.g. "argument --seed: must be from 0 to..."
+        print(f"segparam: error: {exc}", file=sys.stderr)
+        return 2
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     try:
         return args.func(args)
     except SegparamError as exc:
         print(f"segparam: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # writing failed where no check could tell (disk full...): one line
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"segparam: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("segparam: interrupted", file=sys.stderr)

@@ -14,12 +14,13 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import gzip
+import hashlib
 import logging
 import math
 import os
 import re
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -30,10 +31,19 @@ from .mesh import check_mesh
 log = logging.getLogger(__name__)
 
 __all__ = [
+    "ATLAS_SUFFIXES",
+    "DEFAULT_NAME_MAX",
     "SUPPORTED_SUFFIXES",
+    "atlas_file_names",
+    "atlas_stem",
     "atomic_path",
+    "check_output_files",
+    "check_output_folder",
     "checker_image",
+    "fit_name",
     "load_mesh",
+    "mesh_stem",
+    "name_max",
     "render_uv_layout",
     "save_atlas",
     "staged_outputs",
@@ -881,10 +891,15 @@ _READERS = {".obj": _load_obj, ".ply": _load_ply, ".off": _load_off}
 
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; rename it to ``path`` only if the block succeeds."""
+    """Yield a temporary path beside ``path``; rename it to ``path`` only if the block succeeds.
+
+    The temporary name starts with at most 64 bytes of the final name, so that it fits the file
+    system whenever the final name does.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    prefix = f".{_clip(path.name, 64)}."
+    fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=".part", dir=path.parent)
     os.close(fd)
     tmp_path = Path(tmp)
     umask = os.umask(0)
@@ -895,6 +910,179 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         os.replace(tmp_path, path)
     finally:
         tmp_path.unlink(missing_ok=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# Where the outputs go: checked before any work, so that a run never fails at the end for it
+
+#: What segparam appends to the stem of every file of an atlas folder (and ``report.json``).
+ATLAS_SUFFIXES = (".obj", ".mtl", "_checker.png", ".glb", "_uv.png")
+#: File-name limit (bytes) assumed where the file system does not say (ext4, APFS, NTFS: 255).
+DEFAULT_NAME_MAX = 255
+
+
+def _nbytes(name: str) -> int:
+    return len(os.fsencode(name))
+
+
+def _clip(name: str, limit: int) -> str:
+    """The longest prefix of ``name`` of at most ``limit`` bytes (whole characters only)."""
+    raw = os.fsencode(name)
+    if len(raw) <= limit:
+        return name
+    short = raw[:limit].decode("utf-8", errors="ignore")
+    while _nbytes(short) > limit:  # non-UTF-8 names (surrogate escapes): one character at a time
+        short = short[:-1]
+    return short
+
+
+def mesh_stem(path: str | os.PathLike) -> str:
+    """A mesh file's name without its suffix (``lh.pial.gii.gz`` -> ``lh.pial``), or ``mesh``."""
+    name = Path(path).name
+    stem = name[: -len(".gii.gz")] if name.lower().endswith(".gii.gz") else Path(name).stem
+    return stem or "mesh"
+
+
+def _existing(path: Path) -> Path:
+    """``path`` made absolute, or its nearest ancestor that exists (a file or a folder)."""
+    path = Path(os.path.abspath(path))
+    for candidate in (path, *path.parents):
+        if os.path.lexists(candidate):
+            return candidate
+    return Path(path.anchor or os.sep)  # pragma: no cover - the root always exists
+
+
+def name_max(folder: str | os.PathLike) -> int:
+    """Longest file name (bytes) the file system of ``folder`` (or of its nearest existing
+    ancestor) takes; :data:`DEFAULT_NAME_MAX` where it does not say."""
+    base = _existing(Path(folder))
+    if not base.is_dir():
+        base = base.parent
+    try:
+        limit = os.pathconf(base, "PC_NAME_MAX")
+    except (AttributeError, OSError, ValueError):  # no pathconf (Windows), or no answer
+        return DEFAULT_NAME_MAX
+    return int(limit) if limit and limit > 0 else DEFAULT_NAME_MAX
+
+
+def fit_name(stem: str, suffix: str = "", *, limit: int = DEFAULT_NAME_MAX) -> str:
+    """``stem + suffix``, with the stem shortened when the whole exceeds ``limit`` bytes.
+
+    A shortened stem keeps its beginning and gets ``~`` and 8 hex digits of the full stem's
+    sha256, so that two long names with the same beginning still give different names:
+    ``fit_name("a" * 300, ".obj")`` is ``"aaa...a~1b2c3d4e.obj"``, 255 bytes.
+    """
+    if _nbytes(stem + suffix) <= limit:
+        return stem + suffix
+    tag = "~" + hashlib.sha256(os.fsencode(stem)).hexdigest()[:8]
+    room = limit - _nbytes(suffix) - len(tag)
+    if room < 1:
+        raise MeshFileError(f"{suffix}: a file name ending like this cannot fit {limit} bytes")
+    return _clip(stem, room) + tag + suffix
+
+
+def atlas_stem(stem: str, outdir: str | os.PathLike) -> str:
+    """The stem of the atlas files in ``outdir``: ``stem``, or shortened by :func:`fit_name` so
+    that its longest file name (``<stem>_checker.png``) fits the file system."""
+    longest = max(_nbytes(suffix) for suffix in ATLAS_SUFFIXES)
+    return fit_name(stem, limit=name_max(outdir) - longest)
+
+
+def atlas_file_names(stem: str) -> dict[str, str]:
+    """The files :func:`save_atlas` writes into its folder, by role."""
+    return {
+        "obj": f"{stem}.obj",
+        "mtl": f"{stem}.mtl",
+        "checker": f"{stem}_checker.png",
+        "glb": f"{stem}.glb",
+        "uv": f"{stem}_uv.png",
+        "report": "report.json",
+    }
+
+
+def _reason(exc: OSError) -> str:
+    return exc.strerror or str(exc) or type(exc).__name__
+
+
+def check_output_folder(
+    folder: str | os.PathLike,
+    names: Iterable[str] = (),
+    *,
+    inputs: Iterable[str | os.PathLike] = (),
+) -> Path:
+    """Check, before any work, that files ``names`` can be written into ``folder``.
+
+    The folder (or the nearest existing folder above it, where it will be created) must be a
+    folder one can write into: a temporary folder is created there and removed at once. Every
+    name, and the name of every folder still to create, must fit the file system's limit
+    (:func:`name_max`); no name may be an existing folder; and none of the files may be one of
+    ``inputs`` (the atlas of ``dir/scan.obj`` written into ``dir`` would replace ``scan.obj``).
+
+    Returns
+    -------
+    Path
+        ``folder``.
+
+    Raises
+    ------
+    MeshFileError
+        One line naming the path and the problem.
+    """
+    folder = Path(folder)
+    names = list(names)
+    base = _existing(folder)
+    if not base.is_dir():
+        if base == Path(os.path.abspath(folder)):
+            raise MeshFileError(f"{folder}: is a file, not a folder")
+        raise MeshFileError(f"{folder}: cannot create this folder: {base} is a file")
+    limit = name_max(base)
+    missing = Path(os.path.abspath(folder)).relative_to(base).parts
+    for name in [*missing, *names]:
+        if _nbytes(name) > limit:
+            raise MeshFileError(
+                f"{folder}: the name {_clip(name, 40)}... is {_nbytes(name)} bytes long; "
+                f"the file system takes at most {limit}"
+            )
+    try:  # the one reliable test: root, ACLs and read-only mounts all answer it truly
+        os.rmdir(tempfile.mkdtemp(prefix=".segparam-check-", dir=base))
+    except OSError as exc:
+        where = "" if base == Path(os.path.abspath(folder)) else f" (in {base})"
+        raise MeshFileError(f"{folder}: cannot write there{where}: {_reason(exc)}") from None
+    sources = [Path(p) for p in inputs]
+    for name in names:
+        target = folder / name
+        if not os.path.lexists(target):
+            continue
+        if os.path.isdir(target) and not os.path.islink(target):
+            raise MeshFileError(f"{target}: is a folder; an output file cannot replace it")
+        for source in sources:
+            try:
+                same = os.path.samefile(source, target)
+            except OSError:
+                same = False
+            if same:
+                raise MeshFileError(
+                    f"{source}: the output {target} would overwrite this input; "
+                    "write the outputs into another folder"
+                )
+    return folder
+
+
+def check_output_files(
+    paths: Iterable[str | os.PathLike], *, inputs: Iterable[str | os.PathLike] = ()
+) -> list[Path]:
+    """:func:`check_output_folder` for output files given by their paths (grouped by folder)."""
+    paths = [Path(p) for p in paths]
+    inputs = list(inputs)
+    for path in paths:
+        if not path.name or path.name in (".", ".."):
+            raise MeshFileError(f"{path}: is a folder; give a file name")
+    folders: dict[Path, list[str]] = {}
+    for path in paths:
+        folders.setdefault(path.parent, []).append(path.name)
+    for folder, names in folders.items():
+        check_output_folder(folder, names, inputs=inputs)
+    return paths
 
 
 # 17 significant digits write every float64 so that it reads back bit for bit (9 digits moved a
@@ -1042,51 +1230,62 @@ def save_atlas(atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: in
     """Write an atlas into ``outdir``: ``<stem>.obj/.mtl/_checker.png``, ``<stem>.glb``,
     ``<stem>_uv.png`` and ``report.json``.
 
-    Every file is first written into a staging folder inside ``outdir`` and moved into place only
-    when all of them were written, so a failure leaves no partial output.
+    The folder is checked first (:func:`check_output_folder`); a stem too long for the file
+    system is shortened (:func:`atlas_stem`). Every file is then written into a staging folder
+    inside ``outdir`` and moved into place only when all of them were written, so a failure
+    leaves no partial output.
 
     Returns
     -------
     list of Path
         The files written.
+
+    Raises
+    ------
+    MeshFileError
+        The folder cannot take the files (see :func:`check_output_folder`), or writing failed
+        (disk full, ...); one line naming the folder, never a bare OSError.
     """
     import json
 
     outdir = Path(outdir)
+    stem = str(stem)
+    if not stem or stem in (".", "..") or "/" in stem or os.sep in stem:
+        raise MeshFileError(f"stem {stem!r} is not a file name")
+    stem = atlas_stem(stem, outdir)
+    names = atlas_file_names(stem)
+    check_output_folder(outdir, names.values())
     size = size or atlas.packing.resolution
-    names = {
-        "obj": f"{stem}.obj",
-        "mtl": f"{stem}.mtl",
-        "checker": f"{stem}_checker.png",
-        "glb": f"{stem}.glb",
-        "uv": f"{stem}_uv.png",
-        "report": "report.json",
-    }
-    with staged_outputs(outdir) as stage:
-        checker = checker_image(1024)
-        checker.save(stage / names["checker"], format="PNG")
-        (stage / names["mtl"]).write_text(
-            f"# written by segparam\nnewmtl atlas\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\n"
-            f"map_Kd {names['checker']}\n",
-            encoding="utf-8",
-        )
-        write_obj(
-            stage / names["obj"],
-            atlas.V,
-            atlas.F,
-            uv=atlas.uv,
-            uv_faces=atlas.uv_F,
-            mtl=names["mtl"],
-        )
-        (stage / names["glb"]).write_bytes(
-            _glb_bytes(atlas.V[atlas.uv_vertex], atlas.uv_F, atlas.uv, checker)
-        )
-        render_uv_layout(atlas.uv, atlas.uv_F, labels=atlas.chart_of_face, size=size).save(
-            stage / names["uv"], format="PNG"
-        )
-        (stage / names["report"]).write_text(
-            json.dumps(atlas.report(), indent=1, sort_keys=False) + "\n", encoding="utf-8"
-        )
+    try:
+        with staged_outputs(outdir) as stage:
+            checker = checker_image(1024)
+            checker.save(stage / names["checker"], format="PNG")
+            (stage / names["mtl"]).write_text(
+                f"# written by segparam\nnewmtl atlas\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\n"
+                f"map_Kd {names['checker']}\n",
+                encoding="utf-8",
+            )
+            write_obj(
+                stage / names["obj"],
+                atlas.V,
+                atlas.F,
+                uv=atlas.uv,
+                uv_faces=atlas.uv_F,
+                mtl=names["mtl"],
+            )
+            (stage / names["glb"]).write_bytes(
+                _glb_bytes(atlas.V[atlas.uv_vertex], atlas.uv_F, atlas.uv, checker)
+            )
+            render_uv_layout(atlas.uv, atlas.uv_F, labels=atlas.chart_of_face, size=size).save(
+                stage / names["uv"], format="PNG"
+            )
+            (stage / names["report"]).write_text(
+                json.dumps(atlas.report(), indent=1, sort_keys=False) + "\n", encoding="utf-8"
+            )
+    except MeshFileError:
+        raise
+    except OSError as exc:
+        raise MeshFileError(f"{outdir}: cannot write the atlas files: {_reason(exc)}") from None
     return [outdir / name for name in names.values()]
 
 

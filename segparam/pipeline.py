@@ -22,7 +22,7 @@ import numpy as np
 from . import __version__
 from .clean import CleanResult, clean
 from .errors import ConfigError, InvalidMeshError
-from .mesh import boundary_edges, face_areas, unit_frame
+from .mesh import boundary_edges, connected_components, face_areas, unit_frame
 from .pack import PackConfig, PackResult, pack_charts
 from .quality import distortion, signed_areas
 from .remesh import RemeshConfig, RemeshResult, remesh
@@ -38,9 +38,13 @@ log = logging.getLogger(__name__)
 
 __all__ = [
     "MAX_FACES",
+    "MAX_RESOLUTION",
+    "MAX_SEED",
     "Atlas",
     "PipelineConfig",
     "build_atlas",
+    "chart_room",
+    "check_seed",
     "config_from_dict",
     "load_config",
     "pack_atlas",
@@ -49,6 +53,48 @@ __all__ = [
 #: Largest input accepted (faces): a guard against running out of memory (about 3 KB per face
 #: peak in the stages; 24 GB machines manage ~5M faces).
 MAX_FACES = 5_000_000
+#: Largest texture side accepted (texels): the uv-layout image and the packer's canvases grow with
+#: its square (16384: a 0.8 GB image).
+MAX_RESOLUTION = 16384
+#: Seeds are 32-bit (numpy and scikit-learn take 0 .. 2**32 - 1).
+MAX_SEED = 2**32 - 1
+
+
+def check_seed(seed: Any) -> int:
+    """``seed`` as an int, or a :class:`ConfigError` unless it is an integer in [0, MAX_SEED]."""
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise ConfigError(f"seed must be an integer from 0 to {MAX_SEED}, got {seed!r}")
+    if not 0 <= seed <= MAX_SEED:
+        raise ConfigError(f"seed must be an integer from 0 to {MAX_SEED}, got {seed}")
+    return int(seed)
+
+
+def chart_room(resolution: int, padding: int) -> int:
+    """Most charts that can fit a ``resolution`` texture with ``padding``, whatever their shapes.
+
+    Every chart covers at least one texel, at least ``padding`` texels from the border, and at a
+    Chebyshev distance of at least ``padding + 1`` from every other chart's texels. Cut the
+    ``resolution - 2 padding`` texels square inside the border into blocks of ``padding + 1``
+    texels a side: no block can hold texels of two charts, so at most
+    ``ceil((resolution - 2 padding) / (padding + 1))**2`` charts fit (and that many dots do).
+    """
+    inner = int(resolution) - 2 * int(padding)
+    if inner <= 0:
+        return 0
+    blocks = -(-inner // (int(padding) + 1))  # ceil
+    return blocks * blocks
+
+
+def _check_room(n_charts: int, pack: PackConfig, what: str) -> None:
+    """A :class:`ConfigError` when ``n_charts`` charts cannot fit the texture at all."""
+    room = chart_room(pack.resolution, pack.padding)
+    if n_charts > room:
+        G, p = pack.resolution, pack.padding
+        raise ConfigError(
+            f"{what} {n_charts} charts, but a {G}x{G} texture with padding {p} has room for at "
+            f"most {room} (one texel each, {p} texels apart); raise the resolution or lower "
+            "the padding"
+        )
 
 
 @dataclass(frozen=True)
@@ -59,6 +105,12 @@ class PipelineConfig:
     segment: SegmentConfig = field(default_factory=SegmentConfig)
     split: SplitConfig = field(default_factory=SplitConfig)
     pack: PackConfig = field(default_factory=PackConfig)
+
+    def __post_init__(self) -> None:
+        if self.pack.resolution > MAX_RESOLUTION:
+            raise ConfigError(
+                f"[pack] resolution {self.pack.resolution} is above the limit {MAX_RESOLUTION}"
+            )
 
     def as_dict(self) -> dict[str, dict[str, Any]]:
         """Plain dictionary, one table per stage (the TOML layout)."""
@@ -104,7 +156,10 @@ def config_from_dict(data: dict[str, Any], *, source: str = "config") -> Pipelin
             raise ConfigError(f"{source}: [{name}] {exc}") from None
         except (TypeError, ValueError) as exc:
             raise ConfigError(f"{source}: [{name}] {exc}") from None
-    return PipelineConfig(**kwargs)
+    try:
+        return PipelineConfig(**kwargs)
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: {exc}") from None
 
 
 def load_config(path: str | os.PathLike) -> PipelineConfig:
@@ -180,7 +235,14 @@ class Atlas:
         return build_report(self)
 
     def save(self, outdir: str | os.PathLike, *, stem: str = "mesh", **kwargs: Any) -> list[Path]:
-        """Write the OBJ/MTL/checker PNG, GLB, uv-layout PNG and ``report.json`` (atomically)."""
+        """Write the OBJ/MTL/checker PNG, GLB, uv-layout PNG and ``report.json`` (atomically).
+
+        A stem too long for the file system is shortened (``<beginning>~<hash>``); the paths
+        written are returned. A folder that cannot take the files (read-only, a file in the
+        way, disk full...) raises :class:`~segparam.errors.MeshFileError` (a
+        :class:`~segparam.errors.SegparamError` and an ``OSError``) with one line, and leaves no
+        file (see :func:`segparam.io.save_atlas`).
+        """
         from .io import save_atlas
 
         return save_atlas(self, outdir, stem=stem, **kwargs)
@@ -313,8 +375,13 @@ def build_atlas(
     InvalidMeshError
         On input that cannot be made into a mesh (see :func:`segparam.clean.clean`), or more
         than :data:`MAX_FACES` faces.
+    ConfigError
+        A seed out of range, or more charts than the texture has room for at any scale
+        (:func:`chart_room`): checked as soon as the count is known (connected pieces after
+        cleaning, charts after segmentation), not after packing.
     """
     cfg = config or PipelineConfig()
+    seed = check_seed(seed)
     report = progress or (lambda stage, done, total: None)
     n_faces = len(F) if hasattr(F, "__len__") else 0
     if n_faces > MAX_FACES:
@@ -327,6 +394,10 @@ def build_atlas(
     cleaned = clean(V, F)
     timings["clean"] = time.perf_counter() - t
     report("clean", 1, 1)
+    if len(cleaned.F) > chart_room(cfg.pack.resolution, cfg.pack.padding):
+        # Charts are connected: at least one per connected piece (counted only when it can matter).
+        pieces = connected_components(cleaned.F)[0]
+        _check_room(pieces, cfg.pack, f"the mesh has {pieces} connected pieces, so at least")
 
     t = time.perf_counter()
     remeshed = remesh(cleaned.V, cleaned.F, config=cfg.remesh)
@@ -338,6 +409,7 @@ def build_atlas(
     seg = segment(Vm, Fm, config=cfg.segment, seed=seed)
     timings["segment"] = time.perf_counter() - t
     report("segment", 1, 1)
+    _check_room(seg.n_charts, cfg.pack, "the segmentation made")  # splitting only adds charts
 
     t = time.perf_counter()
     chart_set = parameterize_charts(
@@ -378,12 +450,22 @@ def pack_atlas(
     """Pack a chart set and assemble the :class:`Atlas` (the last stage of :func:`build_atlas`).
 
     The stage results that produced the charts are optional: they only feed the report.
+
+    Raises
+    ------
+    ConfigError
+        A seed out of range, or more charts than the texture has room for (:func:`chart_room`),
+        before any packing.
+    SolverError
+        The packer found no scale at which the charts fit.
     """
     cfg = config or PipelineConfig()
+    seed = check_seed(seed)
     timings = dict(timings or {})
+    charts = chart_set.charts
+    _check_room(len(charts), cfg.pack, "there are")
     t = time.perf_counter()
     area = face_areas(V, F)
-    charts = chart_set.charts
     packing = pack_charts(
         [c.uv for c in charts],
         [c.local_F for c in charts],

@@ -15,6 +15,14 @@ neighbourhoods then have to grow, and the solver gets worse. This module therefo
   Euler characteristic), manifoldness and boundary are unchanged; if not, the input is kept and
   the reason says why (:func:`remesh`).
 
+Sharp features are edges (a dihedral angle above ``feature_angle``, which pymeshlab keeps) and
+vertices (:func:`sharp_vertices`: a cone tip, a cube corner, where the angle defect is large while
+every dihedral angle may be small: 500 triangles around a cone's tip meet at under a degree each,
+and pymeshlab's smoothing pulled such a tip down from z = 1 to 0.92). The faces around a sharp
+vertex are left out of the remeshing (pymeshlab's "remesh only selected faces"), so it stays where
+it is, unless three or more sharp edges meet there (a cube's corner), which pymeshlab keeps by
+itself; the result is checked for every sharp vertex.
+
 References
 ----------
 M. Botsch, L. Kobbelt, A remeshing approach to multiresolution modeling, SGP 2004.
@@ -32,6 +40,7 @@ from scipy.spatial import cKDTree
 
 from .errors import ConfigError, InvalidMeshError
 from .mesh import (
+    angle_defect,
     boundary_edges,
     boundary_loops,
     check_mesh,
@@ -39,6 +48,7 @@ from .mesh import (
     corner_angles,
     edges,
     euler_characteristic,
+    face_adjacency,
     face_areas,
     face_normals,
     is_edge_manifold,
@@ -55,6 +65,7 @@ __all__ = [
     "equal_area_edge",
     "mesh_quality",
     "remesh",
+    "sharp_vertices",
     "should_remesh",
 ]
 
@@ -76,6 +87,8 @@ REGULAR_VALENCE_STD = 0.5
 BOUNDARY_TOL = 0.05
 #: Faces with an area below ``AREA_TOL * target_edge**2`` count as degenerate.
 AREA_TOL = 1e-8
+#: A sharp vertex of the result may be this far from its input position (times the target edge).
+SHARP_TOL = 1e-6
 
 
 @dataclass(frozen=True)
@@ -92,7 +105,9 @@ class RemeshConfig:
         equilateral mesh with the input's area and face count), so that the vertex count stays
         about the same.
     feature_angle : float
-        Edges whose dihedral angle exceeds this (degrees) are sharp features and kept.
+        Edges whose dihedral angle exceeds this (degrees) are sharp features and kept; so are
+        vertices whose angle defect exceeds that of a cone whose opposite sides meet at this
+        angle (:func:`sharp_vertices`).
     iterations : int
         Split / collapse / flip / smooth rounds.
     """
@@ -284,6 +299,39 @@ def should_remesh(q: MeshQuality) -> tuple[bool, str]:
     return False, f"well-shaped triangles, kept: {shape}; {conn}"
 
 
+def sharp_vertices(V, F, feature_angle: float = 30.0) -> np.ndarray:
+    """Interior vertices where the surface has a point: a cone tip, a cube corner, a spike.
+
+    A vertex is sharp when the absolute value of its angle defect (``2 pi`` minus the sum of its
+    corner angles) exceeds ``2 pi (1 - cos(feature_angle / 2))``, the defect of a circular cone
+    whose opposite sides meet at ``feature_angle`` (12.3 degrees for 30; a cube corner has 90, the
+    tip of a cone of half-angle 45 degrees 105). On a smooth surface the defect is the Gaussian
+    curvature times the vertex's area, small at any sampling (below 4 degrees on the sample brain).
+    Boundary vertices are not counted: pymeshlab keeps the boundary and its corners.
+
+    Parameters
+    ----------
+    V : (n, 3) array_like of float
+    F : (m, 3) array_like of int
+    feature_angle : float
+        Degrees; 180 or more: no vertex is sharp.
+
+    Returns
+    -------
+    (k,) int64 ndarray
+        The sharp vertices, sorted.
+    """
+    V, F = check_mesh(V, F, allow_degenerate=True)
+    if feature_angle >= 180:
+        return np.zeros(0, dtype=np.int64)
+    limit = 2 * np.pi * (1 - np.cos(np.radians(feature_angle) / 2))
+    defect = np.abs(angle_defect(V, F))
+    sharp = defect > limit
+    sharp[np.unique(boundary_edges(F))] = False
+    sharp[np.bincount(F.ravel(), minlength=len(V)) == 0] = False
+    return np.flatnonzero(sharp).astype(np.int64)
+
+
 # ---------------------------------------------------------------------------------------------
 # Remeshing
 # ---------------------------------------------------------------------------------------------
@@ -330,6 +378,17 @@ def closest_boundary_points(
     return dist[rows, best], Q[rows, best]
 
 
+def _crease_edges_at(V: np.ndarray, F: np.ndarray, feature_angle: float) -> np.ndarray:
+    """Per vertex, how many of its edges pymeshlab takes for sharp (normals of the two faces
+    more than ``feature_angle`` apart, and not folded flat back: cosine >= -0.98)."""
+    pairs, edge = face_adjacency(F)
+    E, _ = edges(F)
+    N = face_normals(V, F)
+    cos = (N[pairs[:, 0]] * N[pairs[:, 1]]).sum(axis=1)
+    crease = (cos <= np.cos(np.radians(feature_angle))) & (cos >= -0.98)
+    return np.bincount(E[np.unique(edge[crease])].ravel(), minlength=len(V))
+
+
 def _topology(F: np.ndarray) -> tuple[int, int, int]:
     count, _ = connected_components(F)
     return count, len(boundary_loops(F)), euler_characteristic(F)
@@ -343,16 +402,35 @@ def _compact(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _run_pymeshlab(
-    V: np.ndarray, F: np.ndarray, target: float, config: RemeshConfig
+    V: np.ndarray,
+    F: np.ndarray,
+    target: float,
+    config: RemeshConfig,
+    frozen: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
+    """pymeshlab's isotropic explicit remeshing; faces where ``frozen`` is True are left out.
+
+    With frozen faces only the others are selected and remeshed ("remesh only selected"): the
+    filter then moves no vertex of a frozen face (its collapses need every face around the moving
+    vertex selected, its smoothing only moves vertices inside the selection), and the final
+    projection onto the input surface leaves points of the surface where they are.
+    """
     import pymeshlab  # slow to import; only needed here
 
     ms = pymeshlab.MeshSet()
-    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=V, face_matrix=F.astype(np.int32)))
+    only_selected = frozen is not None and bool(frozen.any())
+    if only_selected:
+        keep = (~frozen).astype(np.float64)
+        ms.add_mesh(
+            pymeshlab.Mesh(vertex_matrix=V, face_matrix=F.astype(np.int32), f_scalar_array=keep)
+        )
+        ms.compute_selection_by_condition_per_face(condselect="fq > 0.5")
+    else:
+        ms.add_mesh(pymeshlab.Mesh(vertex_matrix=V, face_matrix=F.astype(np.int32)))
     ms.meshing_isotropic_explicit_remeshing(
         iterations=int(config.iterations),
         adaptive=False,
-        selectedonly=False,
+        selectedonly=only_selected,
         targetlen=pymeshlab.PureValue(target),
         featuredeg=float(config.feature_angle),
         checksurfdist=True,
@@ -394,12 +472,18 @@ def _orient_like(V0: np.ndarray, F0: np.ndarray, V: np.ndarray, F: np.ndarray) -
 
 
 def _validate(
-    V0: np.ndarray, F0: np.ndarray, V: np.ndarray, F: np.ndarray, target: float
+    V0: np.ndarray,
+    F0: np.ndarray,
+    V: np.ndarray,
+    F: np.ndarray,
+    target: float,
+    sharp: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, str]:
     """Check the remeshed surface against the input.
 
     Returns ``V`` (boundary vertices snapped onto the input boundary polyline), ``F`` (with the
-    input orientation) and a description of the first problem found ("" if none).
+    input orientation) and a description of the first problem found ("" if none). ``sharp``:
+    input vertices that must still be vertices of the result, in place.
     """
     if len(F) == 0:
         return V, F, "remeshing removed every face"
@@ -437,6 +521,12 @@ def _validate(
     n_zero = int(np.sum(area <= AREA_TOL * target**2))
     if n_zero:
         return V, F, f"remeshing produced {n_zero} zero-area faces"
+    if sharp is not None and len(sharp):
+        moved, _ = cKDTree(V).query(V0[sharp])
+        tol = SHARP_TOL * target + 1e-12 * float(np.abs(V0).max())
+        if moved.max() > tol:
+            n = int((moved > tol).sum())
+            return V, F, f"remeshing moved {n} sharp vertices by up to {moved.max():.3g}"
     return V, F, ""
 
 
@@ -444,9 +534,10 @@ def remesh(V, F, *, config: RemeshConfig | None = None) -> RemeshResult:
     """Isotropic remeshing of a surface when (by ``config.mode``) it helps the chart solver.
 
     The result keeps the input's boundary loops (boundary vertices stay on the input boundary
-    polyline), sharp edges (dihedral angle above ``config.feature_angle``), topology and face
-    orientation. If pymeshlab's result breaks any of these, the input is returned unchanged and
-    ``reason`` names the problem (and a warning is logged).
+    polyline), sharp edges (dihedral angle above ``config.feature_angle``), sharp vertices
+    (:func:`sharp_vertices`: their faces are not remeshed), topology and face orientation. If
+    pymeshlab's result breaks any of these, the input is returned unchanged and ``reason`` names
+    the problem (and a warning is logged).
 
     Parameters
     ----------
@@ -492,9 +583,20 @@ def remesh(V, F, *, config: RemeshConfig | None = None) -> RemeshResult:
         area = face_areas(V, F).sum()
         raise InvalidMeshError(f"the mesh has total area {area:.3g}; it cannot be remeshed")
 
+    # Sharp vertices (cone tips, corners) stay. Where three or more sharp edges meet (a cube's
+    # corner) pymeshlab keeps the vertex itself; around the others (a cone's tip: no sharp edge)
+    # the faces are left out of the remeshing.
+    sharp = sharp_vertices(V, F, config.feature_angle)
+    pinned = sharp[_crease_edges_at(V, F, config.feature_angle)[sharp] < 3] if len(sharp) else sharp
+    frozen = np.isin(F, pinned).any(axis=1) if len(pinned) else None
+    if len(sharp):
+        reason = f"{reason}; {len(sharp)} sharp vertices kept in place"
+    if frozen is not None and frozen.all():
+        return keep(f"{reason}: every face touches one, the input is kept")
+
     t0 = time.perf_counter()
-    V2, F2 = _run_pymeshlab(V, F, target, config)
-    V2, F2, problem = _validate(V, F, V2, F2, target)
+    V2, F2 = _run_pymeshlab(V, F, target, config, frozen)
+    V2, F2, problem = _validate(V, F, V2, F2, target, sharp)
     seconds = time.perf_counter() - t0
     if problem:
         log.warning("remesh: %s; the input is kept", problem)

@@ -1,0 +1,105 @@
+"""Sharp vertices survive remeshing: a cone's tip, a cube's corners.
+
+A user's closed cone with a valence-500 tip was remeshed by ``--remesh auto`` (its slivers ask for
+it) and pymeshlab's smoothing pulled the tip from z = 1.0 down to 0.924: no dihedral angle there
+is sharp (500 faces meet at under a degree each), but the angle defect is. Vertices with a large
+angle defect are features too.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from meshes import tri_grid
+from scipy.spatial import cKDTree
+
+from segparam.clean import clean
+from segparam.io import load_mesh
+from segparam.pipeline import PipelineConfig, build_atlas
+from segparam.remesh import RemeshConfig, remesh, sharp_vertices
+
+TIP = np.array([0.0, 0.0, 1.0])
+
+
+def closed_cone(n: int = 500) -> tuple[np.ndarray, np.ndarray]:
+    """A closed cone of height 1 and radius 1: tip (valence n) at z = 1, a fan for the base."""
+    t = 2 * np.pi * np.arange(n) / n
+    ring = np.c_[np.cos(t), np.sin(t), np.zeros(n)]
+    V = np.vstack([TIP, ring, [0.0, 0.0, 0.0]])
+    i = np.arange(n)
+    j = (i + 1) % n
+    side = np.c_[np.zeros(n, dtype=np.int64), i + 1, j + 1]
+    base = np.c_[np.full(n, n + 1), j + 1, i + 1]
+    return V, np.vstack([side, base]).astype(np.int64)
+
+
+def subdivided_box(times: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    box = trimesh.creation.box()
+    V, F = np.asarray(box.vertices, dtype=np.float64), np.asarray(box.faces, dtype=np.int64)
+    for _ in range(times):
+        V, F = trimesh.remesh.subdivide(V, F)
+    c = clean(V, F)
+    return c.V, c.F
+
+
+def tip_distance(V: np.ndarray) -> float:
+    return float(np.linalg.norm(V - TIP, axis=1).min())
+
+
+@pytest.mark.parametrize("mode", ["auto", "on"])
+def test_cone_tip_stays_in_place(mode):
+    V, F = closed_cone()
+    before = remesh(V, F, config=RemeshConfig(mode="off")).before
+    assert before.frac_small_angles == 1.0  # the policy would remesh this cone
+    res = remesh(V, F, config=RemeshConfig(mode=mode))
+    assert tip_distance(res.V) < 1e-9, res.reason
+    assert res.V[:, 2].max() == pytest.approx(1.0, abs=1e-9)
+    if res.remeshed:
+        assert "1 sharp vertices kept in place" in res.reason
+    assert mode == "auto" or res.remeshed  # "on" still remeshes the rest (the base)
+
+
+def test_cone_tip_stays_through_the_pipeline():
+    V, F = closed_cone(200)
+    cfg = PipelineConfig().replace(pack={"resolution": 128}, remesh={"mode": "auto"})
+    atlas = build_atlas(V, F, cfg)
+    assert tip_distance(atlas.V) < 1e-9
+
+
+def test_sharp_vertices_are_tips_and_corners_not_smooth_or_flat_points():
+    V, F = closed_cone()
+    assert sharp_vertices(V, F).tolist() == [0]  # the tip, not the flat base centre
+    Vb, Fb = subdivided_box()
+    corners = np.abs(np.abs(Vb) - 0.5).max(axis=1) < 1e-12
+    assert sorted(sharp_vertices(Vb, Fb).tolist()) == np.flatnonzero(corners).tolist()
+    sphere = trimesh.creation.icosphere(3)
+    assert len(sharp_vertices(sphere.vertices, sphere.faces)) == 0
+    assert len(sharp_vertices(*load_mesh_sample())) == 0
+    Vg, Fg = tri_grid(6, 5)  # boundary corners do not count
+    assert len(sharp_vertices(Vg, Fg)) == 0
+    assert len(sharp_vertices(V, F, feature_angle=180.0)) == 0
+
+
+def load_mesh_sample() -> tuple[np.ndarray, np.ndarray]:
+    from segparam.cli import _data
+
+    return load_mesh(_data("brain.obj"))
+
+
+def test_cube_corners_stay_in_place():
+    V, F = subdivided_box()
+    res = remesh(V, F, config=RemeshConfig(mode="on"))
+    assert res.remeshed, res.reason
+    corners = V[sharp_vertices(V, F)]
+    moved, _ = cKDTree(res.V).query(corners)
+    assert len(corners) == 8 and moved.max() < 1e-9
+
+
+def test_a_mesh_without_sharp_vertices_is_remeshed_as_before():
+    """No sharp vertex: nothing is frozen, the reason does not mention them."""
+    rng = np.random.default_rng(0)
+    V, F = tri_grid(20, 20)
+    V = V + np.c_[rng.normal(0, 0.01, (len(V), 2)), np.zeros(len(V))]
+    res = remesh(V, F, config=RemeshConfig(mode="on"))
+    assert res.remeshed and "sharp" not in res.reason
