@@ -482,7 +482,8 @@ def holes(prefix, max_free, free_bits, runs, cr, cc, count):  # pragma: no cover
     is its lowest), so rows are scanned upwards and the scan stops at the `count`-th fit.
     Rows whose longest free run is shorter than the footprint's widest run are skipped; in the
     others, the columns where that run fits come from the row's free-cell bits (64 cells a
-    word), and only those positions are tested run by run with the row prefix sums.
+    word), and only those positions are tested run by run with the row prefix sums, starting
+    with the run that blocked the previous position.
     """
     nr = prefix.shape[0]
     nc = prefix.shape[1] - 1
@@ -495,6 +496,7 @@ def holes(prefix, max_free, free_bits, runs, cr, cc, count):  # pragma: no cover
     taken = np.zeros(nc, dtype=np.bool_)
     starts = np.empty(free_bits.shape[1], dtype=np.uint64)
     found = 0
+    hint = 0
     for y in range(nr - cr + 1):
         R = y + iw
         if max_free[R] < ww:
@@ -510,11 +512,16 @@ def holes(prefix, max_free, free_bits, runs, cr, cc, count):  # pragma: no cover
                 j = w * 64 + bit - w0  # the position whose widest run starts at this cell
                 if j < 0 or j > nc - cc or taken[j]:
                     continue
+                # the run that blocked the last position most likely blocks this one too
+                Ru = y + runs[hint, 0]
+                if prefix[Ru, j + runs[hint, 2] + 1] != prefix[Ru, j + runs[hint, 1]]:
+                    continue
                 ok = True
                 for u in range(1, len(runs)):
                     Ru = y + runs[u, 0]
                     if prefix[Ru, j + runs[u, 2] + 1] != prefix[Ru, j + runs[u, 1]]:
                         ok = False
+                        hint = u
                         break
                 if ok:
                     taken[j] = True
