@@ -32,6 +32,8 @@ __all__ = [
     "is_disk",
     "is_edge_manifold",
     "is_vertex_manifold",
+    "label_topology",
+    "disk_labels",
     "vertex_adjacency",
     "vertex_normals",
     "vertex_rings",
@@ -476,3 +478,95 @@ def is_disk(F: np.ndarray, *, holes: bool = True) -> bool:
 def genus(F: np.ndarray) -> int:
     """Genus of a connected, orientable surface: ``(2 - chi - b) / 2`` with ``b`` boundary loops."""
     return (2 - euler_characteristic(F) - len(boundary_loops(F))) // 2
+
+
+# ---------------------------------------------------------------------------------------------
+# Topology of many face sets at once
+# ---------------------------------------------------------------------------------------------
+
+
+def label_topology(F: np.ndarray, labels: np.ndarray, n_labels: int | None = None) -> dict:
+    """Topology of every face set ``F[labels == k]`` at once, each taken as a mesh of its own.
+
+    Every label gets its own copy of its vertices (a vertex shared by two labels is two vertices
+    here), so the union is a disjoint set of small meshes and every test of :func:`is_disk` runs
+    once on it, vectorized, instead of once per label: 2,000 one-triangle charts cost about as
+    much as one 6,000-face mesh.
+
+    Parameters
+    ----------
+    F : (m, 3) int ndarray
+    labels : (m,) int ndarray
+        Non-negative; ``n_labels`` (default ``labels.max() + 1``) sets the output length.
+
+    Returns
+    -------
+    dict of (n_labels,) ndarrays
+        ``faces``, ``vertices``, ``edges`` (counts), ``edge_manifold``, ``vertex_manifold``
+        (bool: as :func:`is_edge_manifold` / :func:`is_vertex_manifold` on the label's faces),
+        ``components`` (vertex-connected pieces), ``loops`` (boundary loops; meaningful where
+        the label is vertex-manifold), ``euler`` (``V - E + F``).
+    """
+    F = np.asarray(F, dtype=np.int64)
+    labels = np.asarray(labels, dtype=np.int64)
+    if n_labels is None:
+        n_labels = int(labels.max()) + 1 if len(labels) else 0
+    n = int(n_labels)
+    if len(F) == 0:
+        zero = np.zeros(n, dtype=np.int64)
+        return {
+            "faces": zero, "vertices": zero, "edges": zero, "components": zero, "loops": zero,
+            "euler": zero, "edge_manifold": np.ones(n, bool), "vertex_manifold": np.ones(n, bool),
+        }  # fmt: skip
+    nv = int(F.max()) + 1
+    keys, Fl = np.unique((labels[:, None] * nv + F).ravel(), return_inverse=True)
+    Fl = Fl.reshape(-1, 3).astype(np.int64)
+    vlabel = keys // nv  # label of every vertex copy
+    n_v = len(keys)
+    E, h2e = edges(Fl)
+    elabel = vlabel[E[:, 0]]
+    count = np.bincount(h2e, minlength=len(E))
+    H = _half_edges(Fl)
+    forward = np.bincount(h2e, weights=(H[:, 0] < H[:, 1]).astype(float), minlength=len(E))
+    bad_edge = (count > 2) | ((count == 2) & (forward != 1))
+    bad_vertex = ~is_vertex_manifold(Fl, n_v, edge_index=(E, h2e))
+    # Vertex-connected pieces (vertex copies never join two labels).
+    _, comp = _cc(vertex_adjacency(Fl, n_v, edge_index=(E, h2e)), directed=False)
+    first = np.unique(comp, return_index=True)[1]
+    # Boundary loops: pieces of the graph of boundary half-edges.
+    B = H[count[h2e] == 1]
+    G = sp.coo_matrix((np.ones(len(B)), (B[:, 0], B[:, 1])), shape=(n_v, n_v))
+    _, loop = _cc(G, directed=False)
+    on_b = np.zeros(n_v, dtype=bool)
+    on_b[B.ravel()] = True
+    loop_first = np.unique(loop[on_b], return_index=True)[1]
+    out = {
+        "faces": np.bincount(labels, minlength=n),
+        "vertices": np.bincount(vlabel, minlength=n),
+        "edges": np.bincount(elabel, minlength=n),
+        "edge_manifold": np.bincount(elabel, weights=bad_edge, minlength=n) == 0,
+        "vertex_manifold": np.bincount(vlabel, weights=bad_vertex, minlength=n) == 0,
+        "components": np.bincount(vlabel[first], minlength=n),
+        "loops": np.bincount(vlabel[np.flatnonzero(on_b)[loop_first]], minlength=n),
+    }
+    out["euler"] = out["vertices"] - out["edges"] + out["faces"]
+    return out
+
+
+def disk_labels(
+    F: np.ndarray, labels: np.ndarray, n_labels: int | None = None, *, holes: bool = True
+) -> np.ndarray:
+    """:func:`is_disk` of every face set ``F[labels == k]``, all at once (see
+    :func:`label_topology`).
+
+    Returns
+    -------
+    (n_labels,) bool ndarray
+        False for labels without faces.
+    """
+    t = label_topology(F, labels, n_labels)
+    loops = t["loops"]
+    ok = t["edge_manifold"] & t["vertex_manifold"] & (t["components"] == 1) & (loops >= 1)
+    if not holes:
+        ok &= loops == 1
+    return ok & (t["euler"] == 2 - loops) & (t["faces"] > 0)

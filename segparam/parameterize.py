@@ -41,6 +41,7 @@ from .linalg import smallest_eigenpairs, spd_solver
 from .mesh import (
     boundary_edges,
     check_mesh,
+    corner_angles,
     edges,
     face_areas,
     is_edge_manifold,
@@ -49,11 +50,14 @@ from .mesh import (
     vertex_normals,
 )
 from .quality import (
+    ANGLE_TOL,
+    DEGENERATE_AREA,
     ChartQuality,
     chart_quality,
     inverse_frames,
     jacobians,
     signed_areas,
+    singular_values,
     triangle_frames,
 )
 
@@ -61,7 +65,9 @@ log = logging.getLogger(__name__)
 
 __all__ = [
     "ChartMap",
+    "ChartMaps",
     "HessianSolver",
+    "charts_quality",
     "check_chart",
     "classic_hlle_matrix",
     "hessian_eigenmap",
@@ -71,6 +77,8 @@ __all__ = [
     "neighbourhoods",
     "orient",
     "parameterize_chart",
+    "quality_records",
+    "solve_charts",
     "tangent_frames",
 ]
 
@@ -851,3 +859,492 @@ def parameterize_chart(
         V, F, method=method, tangent=tangent, min_points=min_points, n_neighbors=n_neighbors
     )
     return solver.solve(seed=seed, refine=refine)
+
+
+# ---------------------------------------------------------------------------------------------
+# Many small charts at once
+# ---------------------------------------------------------------------------------------------
+#
+# A chart of a few dozen vertices costs the solver about 10 ms, almost all of it Python and
+# library-call overhead (the eigenproblem of a 30 x 30 matrix takes 30 us): 600 hemispheres of
+# small closed parts took 6 s. The functions below take a disjoint union of charts (every chart
+# its own vertices, numbered consecutively, chart by chart) and do every step once for all of
+# them: the union's K is block-diagonal, ARAP's Laplacian too, and every measure of
+# :func:`segparam.quality.chart_quality` is a sum, a maximum or a count per chart.
+
+#: Most entries of the dense ``(g, n, n)`` stack handed to one batched ``eigh`` (32 MB).
+BLOCK_ENTRIES = 4_000_000
+
+
+def _chart_sum(ids: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """Sum of ``values`` (``(k,)`` or ``(k, d)``) over each id ``0 .. n - 1``."""
+    if values.ndim == 1:
+        return np.bincount(ids, weights=values, minlength=n)
+    flat = values.reshape(len(values), -1)
+    out = np.stack(
+        [np.bincount(ids, weights=flat[:, j], minlength=n) for j in range(flat.shape[1])], 1
+    )
+    return out.reshape((n,) + values.shape[1:])
+
+
+def _segment_means(values: np.ndarray, start: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """``values[start[c] : start[c] + count[c]].mean()`` for every segment ``c``, bit for bit.
+
+    NumPy sums a contiguous row pairwise, so a row's sum depends on its length's blocking, not
+    just its values; rows of one length are summed as one ``(g, length)`` array, which numpy
+    sums row by row in that same order (one call per distinct length). The solver's scale must
+    be exact: its neighbourhoods are extended by a conditioning threshold, and a last-bit change
+    of the coordinates can move a vertex across it (K of a 40-face hemisphere changed by 30%).
+    """
+    out = np.empty(len(count))
+    for n in np.unique(count):
+        seg = np.flatnonzero(count == n)
+        out[seg] = values[start[seg][:, None] + np.arange(n)].mean(axis=1)
+    return out
+
+
+def _chart_max(ids: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """Largest of ``values`` over each id (``-inf`` where there is none; NaN propagates)."""
+    out = np.full(n, -np.inf)
+    np.maximum.at(out, ids, values)
+    return out
+
+
+def charts_quality(
+    V: np.ndarray,
+    F: np.ndarray,
+    uv: np.ndarray,
+    vert_chart: np.ndarray,
+    n_charts: int,
+    inv_frames: np.ndarray | None = None,
+) -> dict[str, np.ndarray]:
+    """:func:`segparam.quality.chart_quality` of every chart of a disjoint union, at once.
+
+    Parameters
+    ----------
+    V : (n, 3) float ndarray
+    F : (m, 3) int ndarray
+        Charts that share no vertex; each is connected, manifold, with a boundary.
+    uv : (n, 2) float ndarray
+    vert_chart : (n,) int ndarray
+        Chart of every vertex, ``0 .. n_charts - 1``.
+    inv_frames : (m, 2, 2) float ndarray, optional
+        ``inverse_frames(triangle_frames(V, F))``, if already computed.
+
+    Returns
+    -------
+    dict of (n_charts,) ndarrays
+        One per field of :class:`segparam.quality.ChartQuality`, same names and meanings
+        (equal up to rounding: the sums run in another order; see :func:`quality_records`).
+    """
+    n = len(V)
+    face_chart = vert_chart[F[:, 0]]
+    sa = signed_areas(uv, F)
+    total_uv = _chart_sum(face_chart, np.abs(sa), n_charts)
+    degenerate = (
+        np.abs(sa) <= DEGENERATE_AREA * np.maximum(total_uv, np.finfo(float).tiny)[face_chart]
+    )
+    flipped = (sa < 0) & ~degenerate
+
+    angle_sum = np.bincount(F.ravel(), weights=corner_angles(uv, F).ravel(), minlength=n)
+    B = boundary_edges(F)
+    on_boundary = np.zeros(n, dtype=bool)
+    on_boundary[B.ravel()] = True
+    used = np.bincount(F.ravel(), minlength=n) > 0
+    interior_bad = used & ~on_boundary & (np.abs(angle_sum - 2 * np.pi) > ANGLE_TOL)
+    boundary_bad = on_boundary & (angle_sum > 2 * np.pi + ANGLE_TOL)
+
+    out = {
+        "n_flipped": np.bincount(face_chart, weights=flipped, minlength=n_charts).astype(np.int64),
+        "n_degenerate": np.bincount(face_chart, weights=degenerate, minlength=n_charts).astype(
+            np.int64
+        ),
+        "n_branch": np.bincount(
+            vert_chart, weights=interior_bad | boundary_bad, minlength=n_charts
+        ).astype(np.int64),
+        "n_crossings": _charts_crossings(uv, B, vert_chart, n_charts),
+        "loops_oriented": _charts_loops_oriented(uv, B, vert_chart, n_charts),
+    }
+    out["bijective"] = (
+        (out["n_flipped"] == 0)
+        & (out["n_degenerate"] == 0)
+        & (out["n_branch"] == 0)
+        & (out["n_crossings"] == 0)
+        & out["loops_oriented"]
+    )
+    out.update(_charts_distortion(V, F, uv, vert_chart, n_charts, inv_frames))
+    return out
+
+
+def _charts_crossings(
+    uv: np.ndarray, B: np.ndarray, vert_chart: np.ndarray, n_charts: int
+) -> np.ndarray:
+    """:func:`segparam.quality.boundary_crossings` of every chart: one k-d tree for all.
+
+    Each chart's segment midpoints are divided by its longest segment and the charts are set
+    4 apart along a third axis, so one radius-1 pair query finds, for every chart, the pairs its
+    own query (radius: its longest segment) would find, and no pair across charts.
+    """
+    out = np.zeros(n_charts, dtype=np.int64)
+    if len(B) < 2:
+        return out
+    chart = vert_chart[B[:, 0]]
+    P0, P1 = uv[B[:, 0]], uv[B[:, 1]]
+    mid = 0.5 * (P0 + P1)
+    r = _chart_max(chart, np.linalg.norm(P1 - P0, axis=1), n_charts)
+    r = np.where(r > 0, r, 1.0)
+    pts = np.column_stack([mid / r[chart][:, None], 4.0 * chart])
+    pairs = cKDTree(pts).query_pairs(1 + 1e-9, output_type="ndarray")
+    if len(pairs) == 0:
+        return out
+    i, j = pairs[:, 0], pairs[:, 1]
+    shared = (
+        (B[i, 0] == B[j, 0]) | (B[i, 0] == B[j, 1]) | (B[i, 1] == B[j, 0]) | (B[i, 1] == B[j, 1])
+    )
+    i, j = i[~shared], j[~shared]
+    a, b, c, d = P0[i], P1[i], P0[j], P1[j]
+
+    def orient2(p, q, s):
+        return (q[:, 0] - p[:, 0]) * (s[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (s[:, 0] - p[:, 0])
+
+    d1, d2 = orient2(c, d, a), orient2(c, d, b)
+    d3, d4 = orient2(a, b, c), orient2(a, b, d)
+    hit = (d1 * d2 <= 0) & (d3 * d4 <= 0)
+    collinear = (d1 == 0) & (d2 == 0)
+    if collinear.any():
+        t = b - a
+        pa, pb = (a * t).sum(1), (b * t).sum(1)
+        pc, pd = (c * t).sum(1), (d * t).sum(1)
+        overlap = np.maximum(np.minimum(pa, pb), np.minimum(pc, pd)) <= np.minimum(
+            np.maximum(pa, pb), np.maximum(pc, pd)
+        )
+        hit &= ~collinear | overlap
+    return np.bincount(chart[i], weights=hit, minlength=n_charts).astype(np.int64)
+
+
+def _charts_loops_oriented(
+    uv: np.ndarray, B: np.ndarray, vert_chart: np.ndarray, n_charts: int
+) -> np.ndarray:
+    """Per chart: its largest uv boundary loop counter-clockwise, all others clockwise.
+
+    Loops are the pieces of the boundary graph; a loop's signed area is the shoelace sum over
+    its directed edges, in any order (needs a manifold boundary, as
+    :func:`segparam.mesh.boundary_loops` does).
+    """
+    out = np.zeros(n_charts, dtype=bool)
+    if len(B) == 0:
+        return out
+    verts, idx = np.unique(B, return_inverse=True)
+    idx = idx.reshape(-1, 2)
+    nb = len(verts)
+    G = sp.coo_matrix((np.ones(len(idx)), (idx[:, 0], idx[:, 1])), shape=(nb, nb))
+    n_loops, loop = graph_components(G, directed=False)
+    p, q = uv[B[:, 0]], uv[B[:, 1]]
+    area = 0.5 * np.bincount(
+        loop[idx[:, 0]], weights=p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0], minlength=n_loops
+    )
+    loop_chart = np.empty(n_loops, dtype=np.int64)
+    loop_chart[loop] = vert_chart[verts]
+    order = np.lexsort((-np.abs(area), loop_chart))
+    first = np.r_[True, loop_chart[order][1:] != loop_chart[order][:-1]]
+    outer = np.zeros(n_loops, dtype=bool)
+    outer[order[first]] = True
+    wrong = np.where(outer, ~(area > 0), ~(area < 0))
+    bad = np.bincount(loop_chart, weights=wrong, minlength=n_charts)
+    has = np.bincount(loop_chart, minlength=n_charts) > 0
+    return has & (bad == 0)
+
+
+def _charts_distortion(
+    V: np.ndarray,
+    F: np.ndarray,
+    uv: np.ndarray,
+    vert_chart: np.ndarray,
+    n_charts: int,
+    inv_frames: np.ndarray | None = None,
+) -> dict[str, np.ndarray]:
+    """:func:`segparam.quality.distortion` of every chart (each scaled to its own 3-D area)."""
+    face_chart = vert_chart[F[:, 0]]
+    area3 = face_areas(V, F)
+    total3 = _chart_sum(face_chart, area3, n_charts)
+    total_uv = _chart_sum(face_chart, np.abs(signed_areas(uv, F)), n_charts)
+    scale = np.sqrt(np.divide(total3, total_uv, out=np.ones(n_charts), where=total_uv > 0))
+    s1, s2 = singular_values(jacobians(V, F, uv * scale[vert_chart][:, None], inv_frames))
+    w = area3 / total3[face_chart]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv1, inv2 = 1.0 / s1, 1.0 / s2
+        return {
+            "l2_stretch": np.sqrt(_chart_sum(face_chart, w * (inv1**2 + inv2**2) / 2, n_charts)),
+            "linf_stretch": _chart_max(face_chart, inv2, n_charts),
+            "angle_distortion": _chart_sum(face_chart, w * (s1 / s2), n_charts),
+            "area_distortion": _chart_sum(face_chart, w * np.abs(np.log(s1 * s2)), n_charts),
+            "symmetric_dirichlet": _chart_sum(
+                face_chart, w * (s1**2 + s2**2 + inv1**2 + inv2**2), n_charts
+            ),
+        }
+
+
+_QUALITY_FIELDS = (
+    "n_flipped",
+    "n_degenerate",
+    "n_branch",
+    "n_crossings",
+    "loops_oriented",
+    "bijective",
+    "l2_stretch",
+    "linf_stretch",
+    "angle_distortion",
+    "area_distortion",
+    "symmetric_dirichlet",
+)
+
+
+def quality_records(q: dict[str, np.ndarray], charts: np.ndarray | None = None) -> list:
+    """:class:`segparam.quality.ChartQuality` objects (plain Python numbers) from
+    :func:`charts_quality`'s arrays, for the given charts (all by default)."""
+    cols = [q[name] if charts is None else q[name][charts] for name in _QUALITY_FIELDS]
+    return [ChartQuality(*row) for row in zip(*(c.tolist() for c in cols), strict=True)]
+
+
+def _block_eigenmaps(
+    K: sp.csr_matrix, vstart: np.ndarray, size: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`hessian_eigenmap` of every diagonal block of a block-diagonal ``K``.
+
+    Block ``c`` is rows ``vstart[c] .. vstart[c] + size[c]``. Blocks of one size are solved by
+    one batched dense ``eigh`` (each is at most ``DENSE_LIMIT`` rows, where
+    :func:`segparam.linalg.smallest_eigenpairs` is dense too), on one BLAS thread.
+
+    Returns
+    -------
+    Y : (n, 2) float64 ndarray
+        Each block's two coordinates, orthonormal and orthogonal to 1.
+    values : (c, 3) float64 ndarray
+        Each block's three smallest eigenvalues.
+    """
+    from threadpoolctl import threadpool_limits  # installed with scikit-learn
+
+    n_charts = len(size)
+    chart = np.repeat(np.arange(n_charts), size)
+    C = K.tocoo()
+    r, c, v = C.row, C.col, C.data
+    Y = np.zeros((K.shape[0], 2))
+    values = np.zeros((n_charts, 3))
+    entry_size = size[chart[r]]
+    by_size = np.argsort(entry_size, kind="stable")
+    sizes, first = np.unique(entry_size[by_size], return_index=True)
+    bounds = np.r_[first, len(by_size)]
+    with threadpool_limits(limits=1, user_api="blas"):
+        for k, s in enumerate(sizes):  # one batch per block size, not per block
+            e = by_size[bounds[k] : bounds[k + 1]]
+            charts = np.flatnonzero(size == s)
+            slot = np.empty(n_charts, dtype=np.int64)
+            slot[charts] = np.arange(len(charts))
+            step = max(1, BLOCK_ENTRIES // (s * s))
+            for lo in range(0, len(charts), step):
+                part = charts[lo : lo + step]
+                sel = e[(slot[chart[r[e]]] >= lo) & (slot[chart[r[e]]] < lo + step)]
+                A = np.zeros((len(part), s, s))
+                g = slot[chart[r[sel]]] - lo
+                A[g, r[sel] - vstart[chart[r[sel]]], c[sel] - vstart[chart[r[sel]]]] = v[sel]
+                lam, vec = np.linalg.eigh(A)
+                X = vec[:, :, :3] - vec[:, :, :3].mean(axis=1, keepdims=True)
+                U = np.linalg.svd(X, full_matrices=False)[0][:, :, :2]
+                rows = vstart[part][:, None] + np.arange(s)
+                Y[rows] = U
+                values[part] = lam[:, :3]
+    return Y, values
+
+
+def _isometric_fit_charts(
+    V: np.ndarray,
+    F: np.ndarray,
+    Y: np.ndarray,
+    inv_frames: np.ndarray,
+    vert_chart: np.ndarray,
+    n_charts: int,
+) -> np.ndarray:
+    """:func:`isometric_fit` of every chart: one 3 x 3 least-squares problem per chart."""
+    face_chart = vert_chart[F[:, 0]]
+    G = jacobians(V, F, Y, inv_frames)
+    r1, r2 = G[:, 0, :], G[:, 1, :]
+
+    def sym(p, q):
+        return np.stack(
+            [
+                p[:, 0] * q[:, 0],
+                p[:, 1] * q[:, 1],
+                np.sqrt(0.5) * (p[:, 0] * q[:, 1] + p[:, 1] * q[:, 0]),
+            ],
+            axis=1,
+        )
+
+    design = np.stack([sym(r1, r1), 2 * sym(r1, r2), sym(r2, r2)], axis=2)  # (m, 3, 3)
+    w = face_areas(V, F)
+    lhs = _chart_sum(face_chart, np.einsum("m,mij,mik->mjk", w, design, design), n_charts)
+    rhs = _chart_sum(face_chart, np.einsum("m,mij,i->mj", w, design, [1.0, 1.0, 0.0]), n_charts)
+    m11, m12, m22 = np.linalg.solve(lhs, rhs[:, :, None])[:, :, 0].T
+    vals, vecs = np.linalg.eigh(np.stack([np.stack([m11, m12], 1), np.stack([m12, m22], 1)], 1))
+    vals = np.maximum(vals, 1e-12 * np.maximum(vals.max(axis=1, keepdims=True), 1e-300))
+    A = (vecs * np.sqrt(vals)[:, None, :]) @ vecs.transpose(0, 2, 1)
+    return np.einsum("nk,nkl->nl", Y, A[vert_chart])
+
+
+def _arap_charts(
+    V: np.ndarray,
+    F: np.ndarray,
+    uv: np.ndarray,
+    vert_chart: np.ndarray,
+    vstart: np.ndarray,
+    n_charts: int,
+    *,
+    iterations: int = 10,
+    tol: float = ARAP_TOL,
+    min_decrease: float = ARAP_MIN_DECREASE,
+    inv_frames: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_arap` of every chart: one factorization of the block-diagonal Poisson matrix.
+
+    Every chart stops on its own rule (see :func:`arap_refine`) and keeps its map from then on;
+    the others go on. Returns the maps and every chart's number of global steps.
+    """
+    face_chart = vert_chart[F[:, 0]]
+    D = _gradient_operator(V, F, inv_frames)
+    area = face_areas(V, F)
+    w = np.repeat(area, 2)
+    w_total = _chart_sum(face_chart, area, n_charts)
+    free = np.ones(len(V), dtype=bool)
+    free[vstart] = False  # every chart's first vertex is pinned
+    solve = None
+    uv = uv - uv[vstart][vert_chart]
+    previous = np.full(n_charts, np.inf)
+    active = np.ones(n_charts, dtype=bool)
+    steps = np.zeros(n_charts, dtype=np.int64)
+    for step in range(iterations + 1):
+        G = (D @ uv).reshape(-1, 2, 2)
+        p = G[:, 0, 0] + G[:, 1, 1]
+        q = G[:, 0, 1] - G[:, 1, 0]
+        r = np.hypot(p, q)
+        r[r == 0] = 1.0
+        p, q = p / r, q / r
+        Rt = np.stack([np.stack([p, q], 1), np.stack([-q, p], 1)], 1)
+        energy = _chart_sum(face_chart, ((G - Rt) ** 2).sum(axis=(1, 2)) * area, n_charts)
+        energy /= w_total
+        det = G[:, 0, 0] * G[:, 1, 1] - G[:, 0, 1] * G[:, 1, 0]
+        flipped = np.bincount(face_chart, weights=det <= 0, minlength=n_charts) > 0
+        stop = (
+            (step == iterations)
+            | ((energy < tol) & ~flipped)
+            | (previous - energy < min_decrease * previous)
+        )
+        done = active & stop
+        steps[done] = step
+        active &= ~stop
+        if not active.any():
+            break
+        previous = np.where(active, energy, previous)
+        if solve is None:
+            L = (D.T @ sp.diags(w) @ D).tocsc()
+            solve = spd_solver(L[free][:, free])
+        rhs = D.T @ (w[:, None] * Rt.reshape(-1, 2))
+        new = np.zeros_like(uv)
+        new[free] = solve(rhs[free])
+        move = active[vert_chart]
+        uv[move] = new[move]
+    return uv, steps
+
+
+@dataclass(frozen=True)
+class ChartMaps:
+    """Maps of many charts from :func:`solve_charts`.
+
+    Attributes
+    ----------
+    uv : (n, 2) float64 ndarray
+        Every chart's map, as :attr:`ChartMap.uv` (near-isometric, lower corner at 0).
+    quality : dict of (c,) ndarrays
+        :func:`charts_quality` of the maps.
+    refined : (c,) bool ndarray
+        The ARAP refinement was kept.
+    eigenvalues : (c, 3) float64 ndarray
+    """
+
+    uv: np.ndarray
+    quality: dict
+    refined: np.ndarray
+    eigenvalues: np.ndarray
+
+
+def solve_charts(
+    V: np.ndarray,
+    F: np.ndarray,
+    vert_chart: np.ndarray,
+    *,
+    tangent: str = "normals",
+    refine: str = "arap",
+    refine_iterations: int = 10,
+) -> ChartMaps:
+    """``HessianSolver(V_c, F_c, tangent=tangent).solve(refine=...)`` for every chart ``c`` of a
+    disjoint union of small charts, all at once.
+
+    Each chart is centred and scaled to its typical edge as in :class:`HessianSolver`; the
+    union's ``K`` (:func:`hessian_matrix`: every neighbourhood stays in its chart) is
+    block-diagonal, and so are the eigenproblems (:func:`_block_eigenmaps`), the isometric fits,
+    the orientation, the ARAP iterations (:func:`_arap_charts`) and the quality checks
+    (:func:`charts_quality`). A chart's map is its own solver's map up to a rigid motion and
+    rounding (an eigenbasis is only defined up to a rotation).
+
+    Parameters
+    ----------
+    V : (n, 3) float ndarray
+    F : (m, 3) int ndarray
+        Charts that share no vertex, ordered by chart, every one of which :func:`check_chart`
+        accepts, with at most ``DENSE_LIMIT`` vertices, and enough vertices that every
+        neighbourhood can be extended (``max(MIN_POINTS, 1 + largest degree) + MAX_EXTEND`` or
+        more).
+    vert_chart : (n,) int ndarray
+        Chart of every vertex: ``0, 0, ..., 1, 1, ...`` (a chart's vertices are consecutive).
+
+    Returns
+    -------
+    ChartMaps
+    """
+    if refine not in REFINES:
+        raise ValueError(f"refine must be one of {REFINES}, got {refine!r}")
+    vert_chart = np.asarray(vert_chart, dtype=np.int64)
+    n_charts = int(vert_chart[-1]) + 1
+    size = np.bincount(vert_chart, minlength=n_charts)
+    vstart = np.r_[0, np.cumsum(size)[:-1]]
+    face_chart = vert_chart[F[:, 0]]
+    if np.any(np.diff(vert_chart) < 0) or np.any(np.diff(face_chart) < 0):
+        raise ValueError("vertices and faces must be ordered by chart")
+    n_faces = np.bincount(face_chart, minlength=n_charts)
+    fstart = np.r_[0, np.cumsum(n_faces)[:-1]]
+    # As HessianSolver, to the last bit: the mean face area summed as numpy sums a chart's
+    # areas, the centre as numpy sums rows (one after the other, as bincount does).
+    scale = np.sqrt(_segment_means(face_areas(V, F), fstart, n_faces))
+    centre = _chart_sum(vert_chart, V, n_charts) / size[:, None]
+    Vn = (V - centre[vert_chart]) / scale[vert_chart][:, None]
+    K = hessian_matrix(Vn, F, tangent=tangent)
+    Y, values = _block_eigenmaps(K, vstart, size)
+    frames = inverse_frames(triangle_frames(Vn, F))
+    uv = _isometric_fit_charts(Vn, F, Y, frames, vert_chart, n_charts)
+    mirror = _chart_sum(face_chart, signed_areas(uv, F), n_charts) < 0  # orient()
+    uv[mirror[vert_chart], 0] *= -1.0
+    q = charts_quality(Vn, F, uv, vert_chart, n_charts, frames)
+    use_r = np.zeros(n_charts, dtype=bool)
+    if refine == "arap":
+        uv_r, steps = _arap_charts(
+            Vn, F, uv, vert_chart, vstart, n_charts, iterations=refine_iterations,
+            inv_frames=frames,
+        )  # fmt: skip
+        if steps.any():
+            q_r = charts_quality(Vn, F, uv_r, vert_chart, n_charts, frames)
+            use_r = (steps > 0) & (
+                q_r["bijective"] | (~q["bijective"] & (q_r["n_flipped"] < q["n_flipped"]))
+            )
+            q = {k: np.where(use_r, q_r[k], q[k]) for k in q}
+            uv = np.where(use_r[vert_chart][:, None], uv_r, uv)
+    low = np.minimum.reduceat(uv, vstart, axis=0)
+    uv = (uv - low[vert_chart]) * scale[vert_chart][:, None]
+    return ChartMaps(uv=uv, quality=q, refined=use_r, eigenvalues=values)

@@ -249,3 +249,77 @@ def test_bad_charts_raise_with_the_reason():
         parameterize_chart(V[:, :2], F)
     with pytest.raises(ValueError, match="method"):
         parameterize_chart(V, F, method="lscm")
+
+
+# --------------------------------------------------------------------------------------------------
+# many small charts at once
+
+
+def _union(charts):
+    """Disjoint union of (V, F) charts, chart by chart, and every vertex's chart."""
+    offsets = np.cumsum([0] + [len(V) for V, _ in charts])
+    V = np.vstack([V for V, _ in charts])
+    F = np.vstack([F + o for (_, F), o in zip(charts, offsets, strict=False)])
+    return V, F, np.repeat(np.arange(len(charts)), np.diff(offsets))
+
+
+def _small_charts():
+    """Charts of 16 to 49 vertices: caps, a saddle, a cylinder patch, a plane (rigidly moved)."""
+    caps = [spherical_cap(n, n, extent=e) for n, e in ((5, 1.2), (6, 1.6), (7, 1.0), (5, 1.6))]
+    V, F = tri_grid(5, 4)
+    return caps + [saddle(6, 5, k=2.0), cylinder_patch(6, 4), (rigid(V, seed=2), F)]
+
+
+@pytest.mark.parametrize("refine, tangent", [("arap", "normals"), ("none", "pca")])
+def test_solve_charts_is_the_solver_chart_by_chart(refine, tangent):
+    from segparam.parameterize import quality_records, solve_charts
+
+    charts = _small_charts()
+    V, F, vert_chart = _union(charts)
+    maps = solve_charts(V, F, vert_chart, tangent=tangent, refine=refine)
+    for k, ((Vc, Fc), q) in enumerate(zip(charts, quality_records(maps.quality), strict=True)):
+        ref = parameterize_chart(Vc, Fc, tangent=tangent, refine=refine)
+        uv = maps.uv[vert_chart == k]
+        assert procrustes_residual(uv, ref.uv) < 1e-9 * np.ptp(ref.uv)  # up to a rigid motion
+        assert uv.min(axis=0) == pytest.approx([0, 0], abs=1e-12)  # as ChartMap.uv
+        assert maps.refined[k] == ref.refined
+        assert maps.eigenvalues[k] == pytest.approx(ref.eigenvalues, rel=1e-6, abs=1e-9)
+        for name, value in ref.quality.as_dict().items():
+            assert getattr(q, name) == pytest.approx(value, rel=1e-9, abs=1e-12), name
+
+
+def test_charts_quality_is_chart_quality_chart_by_chart():
+    from segparam.parameterize import charts_quality, quality_records
+    from segparam.quality import chart_quality
+
+    # Good and bad maps side by side: flipped triangles, a fold, a mirror, a hole, a crossing.
+    V, F = tri_grid(6, 6)
+    uv = V[:, :2].copy()
+    folded = uv.copy()
+    folded[V[:, 0] > 0.6, 0] = 1.2 - folded[V[:, 0] > 0.6, 0]  # fold the right part over
+    bent = uv.copy()
+    bent[14] += [0.5, 0.1]  # one vertex across its neighbours
+    C = V[F].mean(axis=1)
+    keep = np.hypot(C[:, 0] - 0.5, C[:, 1] - 0.45) > 0.15
+    used, Fh = np.unique(F[keep], return_inverse=True)
+    annulus = (V[used], Fh.reshape(-1, 3))  # a disk with a hole
+    cases = [
+        (V, F, uv),
+        (V, F, folded),
+        (V, F, bent),
+        (V, F, uv * [-1.0, 1.0]),
+        (annulus[0], annulus[1], annulus[0][:, :2]),
+        (annulus[0], annulus[1], annulus[0][:, :2] * [1.0, -1.0]),
+    ]
+    Vu, Fu, vert_chart = _union([(v, f) for v, f, _ in cases])
+    uvu = np.vstack([u for _, _, u in cases])
+    got = quality_records(charts_quality(Vu, Fu, uvu, vert_chart, len(cases)))
+    bijective = []
+    for (v, f, u), q in zip(cases, got, strict=True):
+        ref = chart_quality(v, f, u)
+        bijective.append(ref.bijective)
+        for name, value in ref.as_dict().items():
+            assert type(getattr(q, name)) is type(value), name
+            assert getattr(q, name) == pytest.approx(value, rel=1e-12, abs=1e-12), name
+    assert bijective == [True, False, False, False, True, False]
+    assert got[1].n_crossings > 0 and got[2].n_flipped > 0 and not got[3].loops_oriented
