@@ -24,9 +24,11 @@ took 2.6 s, 600 hemispheres of 300 small spheres 6.2 s.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import os
+import signal
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -190,6 +192,32 @@ def project_chart(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     return np.stack([X @ b1, X @ b2], axis=1)
 
 
+@contextlib.contextmanager
+def _sigint_blocked():
+    """Block SIGINT in this thread while worker processes start (POSIX; a no-op elsewhere).
+
+    A process started meanwhile inherits the blocked mask; a Ctrl-C that arrives meanwhile is
+    delivered here when the block ends.
+    """
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def _stop(pool) -> None:
+    """Cancel what has not started and end the workers now (they ignore Ctrl-C)."""
+    # taken before shutdown, which forgets them
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.terminate()
+
+
 def parameterize_charts(
     V: np.ndarray,
     F: np.ndarray,
@@ -262,16 +290,21 @@ def parameterize_charts(
 
         ctx = multiprocessing.get_context("spawn")  # no fork after BLAS threads have started
         by_size = sorted(rest, key=lambda s: -len(sources[s]))  # big ones first
-        with ProcessPoolExecutor(max_workers=min(jobs, len(rest)), mp_context=ctx) as pool:
-            futures = {pool.submit(_solve_source, *task(s), cfg, seed): s for s in by_size}
-            try:
-                for done, future in enumerate(as_completed(futures), len(final) + 1):
-                    results[futures[future]] = future.result()
-                    if progress is not None:
-                        progress(done)
-            except BaseException:
-                pool.shutdown(cancel_futures=True)
-                raise
+        pool = ProcessPoolExecutor(max_workers=min(jobs, len(rest)), mp_context=ctx)
+        try:
+            # Ctrl-C goes to the whole process group. The workers start (and live) with SIGINT
+            # blocked, a mask they inherit, so only this process sees it and stops them: no
+            # traceback from a worker that was still importing.
+            with _sigint_blocked():
+                futures = {pool.submit(_solve_source, *task(s), cfg, seed): s for s in by_size}
+            for done, future in enumerate(as_completed(futures), len(final) + 1):
+                results[futures[future]] = future.result()
+                if progress is not None:
+                    progress(done)
+        except BaseException:
+            _stop(pool)
+            raise
+        pool.shutdown()
     else:
         cache: list[sp.csr_matrix] = []
 
