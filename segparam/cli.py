@@ -70,7 +70,7 @@ def _number(low: float):
 # segparam.pipeline.MAX_RESOLUTION and MAX_SEED (not imported: --help stays fast); the tests check
 # that they agree.
 _MAX_RESOLUTION, _MAX_SEED = 16384, 2**32 - 1
-#: ``--seed``: numpy and scikit-learn take 32-bit seeds.
+#: ``--seed``: numpy's RandomState (the clustering's start vector) takes 32-bit seeds.
 SEED = _integer(0, _MAX_SEED)
 #: ``--resolution``: texels per side.
 RESOLUTION = _integer(1, _MAX_RESOLUTION)

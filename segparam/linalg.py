@@ -131,7 +131,7 @@ def smallest_eigenpairs(
     if k >= n:
         raise ValueError(f"asked for {k} eigenpairs of a {n} x {n} matrix")
     if n <= dense_limit:
-        from threadpoolctl import threadpool_limits  # installed with scikit-learn
+        from threadpoolctl import threadpool_limits
 
         A = K.toarray() if sp.issparse(K) else np.asarray(K)
         # Threads only slow down a few-hundred-row eigh (5-8x measured on a busy 2-core box).

@@ -1122,7 +1122,7 @@ def _block_eigenmaps(
     values : (c, 3) float64 ndarray
         Each block's three smallest eigenvalues.
     """
-    from threadpoolctl import threadpool_limits  # installed with scikit-learn
+    from threadpoolctl import threadpool_limits
 
     n_charts = len(size)
     chart = np.repeat(np.arange(n_charts), size)

@@ -56,7 +56,7 @@ MAX_FACES = 5_000_000
 #: Largest texture side accepted (texels): the uv-layout image and the packer's canvases grow with
 #: its square (16384: a 0.8 GB image).
 MAX_RESOLUTION = 16384
-#: Seeds are 32-bit (numpy and scikit-learn take 0 .. 2**32 - 1).
+#: Seeds are 32-bit (numpy's legacy RandomState, which seeds the clustering, takes 0 .. 2**32 - 1).
 MAX_SEED = 2**32 - 1
 
 
@@ -252,7 +252,7 @@ def _versions() -> dict[str, str]:
     import importlib.metadata as md
 
     out = {"segparam": __version__, "python": sys.version.split()[0]}
-    for name in ("numpy", "scipy", "scikit-learn", "pymeshlab", "trimesh"):
+    for name in ("numpy", "scipy", "numba", "cvxopt", "pymeshlab", "trimesh"):
         try:
             out[name] = md.version(name)
         except md.PackageNotFoundError:  # pragma: no cover

@@ -47,7 +47,7 @@ import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components as _cc
 from scipy.sparse.csgraph import dijkstra
 from scipy.special import ive
-from threadpoolctl import threadpool_limits  # installed with scikit-learn
+from threadpoolctl import threadpool_limits
 
 from .errors import ConfigError
 from .linalg import DENSE_LIMIT, smallest_eigenpairs, spd_solver
