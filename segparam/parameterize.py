@@ -56,6 +56,7 @@ from .quality import (
     chart_quality,
     inverse_frames,
     jacobians,
+    segment_pairs_cross,
     signed_areas,
     singular_values,
     triangle_frames,
@@ -998,27 +999,7 @@ def _charts_crossings(
     if len(pairs) == 0:
         return out
     i, j = pairs[:, 0], pairs[:, 1]
-    shared = (
-        (B[i, 0] == B[j, 0]) | (B[i, 0] == B[j, 1]) | (B[i, 1] == B[j, 0]) | (B[i, 1] == B[j, 1])
-    )
-    i, j = i[~shared], j[~shared]
-    a, b, c, d = P0[i], P1[i], P0[j], P1[j]
-
-    def orient2(p, q, s):
-        return (q[:, 0] - p[:, 0]) * (s[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (s[:, 0] - p[:, 0])
-
-    d1, d2 = orient2(c, d, a), orient2(c, d, b)
-    d3, d4 = orient2(a, b, c), orient2(a, b, d)
-    hit = (d1 * d2 <= 0) & (d3 * d4 <= 0)
-    collinear = (d1 == 0) & (d2 == 0)
-    if collinear.any():
-        t = b - a
-        pa, pb = (a * t).sum(1), (b * t).sum(1)
-        pc, pd = (c * t).sum(1), (d * t).sum(1)
-        overlap = np.maximum(np.minimum(pa, pb), np.minimum(pc, pd)) <= np.minimum(
-            np.maximum(pa, pb), np.maximum(pc, pd)
-        )
-        hit &= ~collinear | overlap
+    hit = segment_pairs_cross(P0, P1, B, i, j)
     return np.bincount(chart[i], weights=hit, minlength=n_charts).astype(np.int64)
 
 

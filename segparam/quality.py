@@ -187,11 +187,17 @@ def boundary_crossings(uv: np.ndarray, B: np.ndarray) -> int:
     pairs = cKDTree(mid).query_pairs(r * (1 + 1e-9), output_type="ndarray")
     if len(pairs) == 0:
         return 0
-    i, j = pairs[:, 0], pairs[:, 1]
+    return int(segment_pairs_cross(P0, P1, B, pairs[:, 0], pairs[:, 1]).sum())
+
+
+def segment_pairs_cross(
+    P0: np.ndarray, P1: np.ndarray, B: np.ndarray, i: np.ndarray, j: np.ndarray
+) -> np.ndarray:
+    """Whether segments ``i`` and ``j`` (``P0[k] -> P1[k]``, edge ``B[k]``) meet, per pair;
+    pairs that share an endpoint index are not crossings (False)."""
     shared = (
         (B[i, 0] == B[j, 0]) | (B[i, 0] == B[j, 1]) | (B[i, 1] == B[j, 0]) | (B[i, 1] == B[j, 1])
     )
-    i, j = i[~shared], j[~shared]
     a, b, c, d = P0[i], P1[i], P0[j], P1[j]
 
     def orient(p, q, s):
@@ -210,7 +216,7 @@ def boundary_crossings(uv: np.ndarray, B: np.ndarray) -> int:
             np.maximum(pa, pb), np.maximum(pc, pd)
         )
         hit &= ~collinear | overlap
-    return int(hit.sum())
+    return hit & ~shared
 
 
 def _loop_area(uv: np.ndarray, loop: np.ndarray) -> float:
