@@ -489,7 +489,7 @@ def holes(prefix, max_free, free_bits, runs, cr, cc, count):  # pragma: no cover
     nc = prefix.shape[1] - 1
     out_r = np.empty(count, dtype=np.int64)
     out_c = np.empty(count, dtype=np.int64)
-    if cr > nr or cc > nc or len(runs) == 0:
+    if cr > nr or cc > nc or len(runs) == 0 or count <= 0:
         return 0, out_r, out_c
     iw, w0, w1 = runs[0, 0], runs[0, 1], runs[0, 2]
     ww = w1 - w0 + 1
