@@ -52,7 +52,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from segparam import canvas
 from segparam.errors import ConfigError, InvalidMeshError, SolverError
-from segparam.raster import boundary_edges, footprint_conflicts, rasterize_footprint
+from segparam.raster import footprint_conflicts, rasterize_footprint
 
 __all__ = [
     "PackConfig",
@@ -88,6 +88,9 @@ _SLIDE_STEPS = 1024
 # A chart whose convex hull fills at least this much of its minimum-area box is a rectangle for
 # the packer: it only turns by quarter turns.
 _BOXY = 0.95
+# Charts of at most this many uv points find their hull and minimum-area box together, without
+# qhull (a convex hull per chart cost 0.26 of the 0.41 s that preparing 2,000 triangles took).
+_SMALL_HULL = 12
 # Footprints whose longest side is shorter than this (texels) turn by quarter turns only: at 24,
 # 2,000 triangles pack 23% faster and 300 spheres' halves 48% faster, for -0.5 / -0.05 points
 # (BENCHMARKS.md, section 4); 48 cost the spheres 1.9 points.
@@ -291,6 +294,13 @@ def _triangle_areas(uv: np.ndarray, F: np.ndarray) -> np.ndarray:
 def _prepare(
     uvs: Sequence[np.ndarray], faces: Sequence[np.ndarray], areas3d: ArrayLike
 ) -> list[_Chart]:
+    """Validate the charts and put each in its canonical frame, all charts at once.
+
+    Per chart: uv area scaled to the 3-D area, turned to the minimum-area box, minimum corner
+    at the origin, faces counter-clockwise, and the outline for the fill rasterizer when every
+    triangle is counter-clockwise. The only loops are over charts for their shapes and, for
+    charts of more than `_SMALL_HULL` points, their convex hulls.
+    """
     if len(uvs) == 0:
         raise InvalidMeshError("no charts to pack (empty list)")
     if len(faces) != len(uvs):
@@ -298,53 +308,158 @@ def _prepare(
     areas = np.asarray(areas3d, dtype=np.float64).reshape(-1)
     if areas.shape[0] != len(uvs):
         raise InvalidMeshError(f"got {len(uvs)} charts but {areas.shape[0]} 3-D areas")
-    charts = []
-    for i, (uv, F) in enumerate(zip(uvs, faces, strict=True)):
+    uv_list, F_list = [], []
+    for i, (uv, F) in enumerate(zip(uvs, faces, strict=True)):  # loop over charts: shapes
         uv = np.asarray(uv, dtype=np.float64)
         F = np.asarray(F)
         if uv.ndim != 2 or uv.shape[1] != 2 or uv.shape[0] < 3:
             raise InvalidMeshError(f"chart {i}: uv must be (n, 2) with n >= 3, got {uv.shape}")
-        if not np.all(np.isfinite(uv)):
-            raise InvalidMeshError(f"chart {i}: uv has non-finite coordinates")
         if F.ndim != 2 or F.shape[1] != 3 or F.shape[0] == 0:
             raise InvalidMeshError(f"chart {i}: faces must be (m, 3) with m >= 1, got {F.shape}")
         if not np.issubdtype(F.dtype, np.integer):
             raise InvalidMeshError(f"chart {i}: faces must be integers, got dtype {F.dtype}")
-        F = F.astype(np.int64)
-        if F.min() < 0 or F.max() >= uv.shape[0]:
+        uv_list.append(uv)
+        F_list.append(F)
+    n = len(uv_list)
+    nv = np.array([len(u) for u in uv_list])
+    nf = np.array([len(f) for f in F_list])
+    voff = np.r_[0, np.cumsum(nv)[:-1]]
+    foff = np.r_[0, np.cumsum(nf)[:-1]]
+    U = np.concatenate(uv_list)
+    Fl = np.concatenate(F_list).astype(np.int64)  # local indices
+    vchart = np.repeat(np.arange(n), nv)
+    fchart = np.repeat(np.arange(n), nf)
+
+    def first(bad: np.ndarray) -> int:
+        return int(np.flatnonzero(bad)[0])
+
+    bad = np.bincount(vchart, ~np.isfinite(U).all(axis=1), minlength=n) > 0
+    if bad.any():
+        raise InvalidMeshError(f"chart {first(bad)}: uv has non-finite coordinates")
+    fmin = np.minimum.reduceat(Fl.min(axis=1), foff)
+    fmax = np.maximum.reduceat(Fl.max(axis=1), foff)
+    bad = (fmin < 0) | (fmax >= nv)
+    if bad.any():
+        i = first(bad)
+        raise InvalidMeshError(
+            f"chart {i}: face indices span [{fmin[i]}, {fmax[i]}] but uv has {nv[i]} rows"
+        )
+    bad = ~np.isfinite(areas) | ~(areas > 0)
+    if bad.any():
+        i = first(bad)
+        raise InvalidMeshError(
+            f"chart {i} has 3-D area {float(areas[i])}; every chart needs a positive one"
+        )
+    G = Fl + voff[fchart][:, None]  # faces into U
+    signed = _triangle_areas(U, G)
+    area_uv = np.bincount(fchart, np.abs(signed), minlength=n)
+    span = (np.maximum.reduceat(U, voff) - np.minimum.reduceat(U, voff)).max(axis=1)
+    bad = ~(area_uv > 1e-14 * span * span)
+    if bad.any():
+        i = first(bad)
+        raise InvalidMeshError(
+            f"chart {i} has uv area {area_uv[i]:.3g} (bounding box {span[i]:.3g}); it must be "
+            "mapped to the plane with a positive area"
+        )
+    angle, fill = _min_area_angles(U, nv, voff)
+    k = np.sqrt(areas / area_uv)
+    c, s = np.cos(angle), np.sin(angle)
+    cv, sv = c[vchart], s[vchart]
+    r = np.column_stack([cv * U[:, 0] - sv * U[:, 1], sv * U[:, 0] + cv * U[:, 1]])
+    low = np.minimum.reduceat(r, voff)
+    Q = (r - low[vchart]) * k[vchart, None]
+    extent = np.maximum.reduceat(Q, voff)
+    to_q = np.zeros((n, 3, 3))
+    to_q[:, 0, 0], to_q[:, 0, 1], to_q[:, 1, 0], to_q[:, 1, 1] = k * c, -k * s, k * s, k * c
+    to_q[:, :2, 2] = -k[:, None] * low
+    to_q[:, 2, 2] = 1.0
+    flip = (np.bincount(fchart, signed, minlength=n) < 0)[fchart]  # keep the faces ccw
+    G[flip] = G[flip][:, [0, 2, 1]]
+    # the outline rasterizer needs every triangle counter-clockwise (no flip, no sliver)
+    ccw = np.bincount(fchart, _triangle_areas(Q, G) <= 0, minlength=n) == 0
+    outlines = _outlines(G, fchart, voff, ccw, len(U))
+    return [
+        _Chart(
+            i, uv_list[i], Q[voff[i] : voff[i] + nv[i]], G[foff[i] : foff[i] + nf[i]] - voff[i],
+            extent[i], to_q[i], float(areas[i]), bool(fill[i] >= _BOXY), outlines[i],
+        )  # fmt: skip
+        for i in range(n)  # loop over charts: views into the arrays above
+    ]
+
+
+def _min_area_angles(U: np.ndarray, nv: np.ndarray, voff: np.ndarray):
+    """`_min_area_angle` of every chart's points ``U[voff[i] : voff[i] + nv[i]]``: (angles, fills).
+
+    Charts of up to `_SMALL_HULL` points are done together, a group per point count: a directed
+    pair (i, j) is a hull edge when no point lies right of it and the points on its line lie
+    between i and j, which gives the hull without qhull; the boxes of the hull edges' directions
+    are measured as in `_min_area_angle`. Larger charts go through `_min_area_angle` one by one.
+    """
+    n = len(nv)
+    angle, fill = np.zeros(n), np.zeros(n)
+    for size in np.unique(nv):  # loop over the few distinct point counts of small charts
+        idx = np.flatnonzero(nv == size)
+        if size > _SMALL_HULL:
+            for i in idx:  # loop over large charts
+                try:
+                    angle[i], fill[i] = _min_area_angle(U[voff[i] : voff[i] + size])
+                except InvalidMeshError as exc:
+                    raise InvalidMeshError(f"chart {i}: {exc}") from exc
+            continue
+        P = U[voff[idx][:, None] + np.arange(size)]  # (c, n, 2)
+        P = P - P.mean(axis=1, keepdims=True)
+        ii, jj = np.nonzero(~np.eye(size, dtype=bool))  # directed pairs
+        d = P[:, jj] - P[:, ii]  # (c, pairs, 2)
+        rel = P[:, None, :, :] - P[:, ii][:, :, None, :]  # (c, pairs, n, 2)
+        cross = d[..., None, 0] * rel[..., 1] - d[..., None, 1] * rel[..., 0]
+        along = (rel * d[:, :, None, :]).sum(-1)
+        length2 = (d * d).sum(-1)
+        between = (along >= 0) & (along <= length2[..., None])
+        hull = ((cross > 0) | ((cross == 0) & between)).all(axis=2) & (length2 > 0)
+        area = 0.5 * np.where(hull, P[:, ii, 0] * P[:, jj, 1] - P[:, ii, 1] * P[:, jj, 0], 0)
+        area = area.sum(axis=1)
+        theta = np.arctan2(d[..., 1], d[..., 0])
+        cs, sn = np.cos(theta), np.sin(theta)
+        x = cs[..., None] * P[:, None, :, 0] + sn[..., None] * P[:, None, :, 1]
+        y = -sn[..., None] * P[:, None, :, 0] + cs[..., None] * P[:, None, :, 1]
+        w, h = np.ptp(x, axis=2), np.ptp(y, axis=2)
+        box = np.where(hull, w * h, np.inf)
+        best_area = box.min(axis=1)
+        if not np.all(area > 0) or not np.all(np.isfinite(best_area)):
+            bad = idx[~(area > 0) | ~np.isfinite(best_area)][0]
             raise InvalidMeshError(
-                f"chart {i}: face indices span [{F.min()}, {F.max()}] but uv has {uv.shape[0]} rows"
+                f"chart {bad}: chart uv points span no area ({size} points are collinear or "
+                "coincide)"
             )
-        a3 = float(areas[i])
-        if not np.isfinite(a3) or a3 <= 0:
-            raise InvalidMeshError(f"chart {i} has 3-D area {a3}; every chart needs a positive one")
-        signed = _triangle_areas(uv, F)
-        area_uv = float(np.abs(signed).sum())
-        span = float(np.ptp(uv, axis=0).max())
-        if not area_uv > 1e-14 * span * span:
-            raise InvalidMeshError(
-                f"chart {i} has uv area {area_uv:.3g} (bounding box {span:.3g}); it must be "
-                "mapped to the plane with a positive area"
-            )
-        try:
-            angle, fill = _min_area_angle(uv)
-        except InvalidMeshError as exc:
-            raise InvalidMeshError(f"chart {i}: {exc}") from exc
-        k = np.sqrt(a3 / area_uv)
-        R = _rotation(angle)
-        r = uv @ R.T
-        low = r.min(axis=0)
-        to_q = np.eye(3)
-        to_q[:2, :2] = k * R
-        to_q[:2, 2] = -k * low
-        q = (r - low) * k
-        extent = q.max(axis=0)
-        if signed.sum() < 0:  # keep the kernels' faces counter-clockwise
-            F = F[:, [0, 2, 1]]
-        # the outline rasterizer needs every triangle counter-clockwise (no flip, no sliver)
-        boundary = boundary_edges(F) if np.all(_triangle_areas(q, F) > 0) else None
-        charts.append(_Chart(i, uv, q, F, extent, to_q, a3, fill >= _BOXY, boundary))
-    return charts
+        # tolerant argmin, as in `_min_area_angle`: the first pair within 1e-12 of the minimum
+        best = np.argmax(box <= best_area[:, None] * (1 + 1e-12), axis=1)
+        rows = np.arange(len(idx))
+        a = -theta[rows, best] + np.where(h[rows, best] > w[rows, best], np.pi / 2, 0.0)
+        angle[idx] = np.arctan2(np.sin(a), np.cos(a))
+        fill[idx] = area / best_area
+    return angle, fill
+
+
+def _outlines(G: np.ndarray, fchart: np.ndarray, voff: np.ndarray, ok: np.ndarray, n_points: int):
+    """`segparam.raster.boundary_edges` of every chart whose `ok` is set (None for the others
+    and where the fill cannot use the outline), local indices, all charts in one pass."""
+    n = len(voff)
+    E = np.concatenate([G[:, [0, 1]], G[:, [1, 2]], G[:, [2, 0]]])  # per chart: 01, 12, 20
+    echart = np.tile(fchart, 3)
+    directed = E[:, 0] * n_points + E[:, 1]
+    _, inv_d, count_d = np.unique(directed, return_inverse=True, return_counts=True)
+    undirected = np.minimum(E[:, 0], E[:, 1]) * n_points + np.maximum(E[:, 0], E[:, 1])
+    _, inv_u, count_u = np.unique(undirected, return_inverse=True, return_counts=True)
+    count_u = count_u[inv_u.ravel()]
+    bad_edge = (count_d[inv_d.ravel()] > 1) | (count_u > 2)
+    ok = ok & (np.bincount(echart, bad_edge, minlength=n) == 0)
+    keep = (count_u == 1) & ok[echart]
+    order = np.argsort(echart[keep], kind="stable")
+    B, bchart = E[keep][order], echart[keep][order]
+    bounds = np.searchsorted(bchart, np.arange(n + 1))
+    return [
+        (B[bounds[i] : bounds[i + 1]] - voff[i]) if ok[i] else None for i in range(n)
+    ]  # loop over charts: slices
 
 
 # ----------------------------------------------------------------------------------------------
@@ -381,34 +496,36 @@ class _Angles:
     """
 
     def __init__(self, charts: list[_Chart], angles: int) -> None:
-        pts, ext, lows, rots, q_ptr, entry_ptr = [], [], [], [], [0], [0]
-        elems, el_ptr, fill = [], [0], []
-        for ch in charts:  # loop over charts
-            steps = 1 if ch.boxy else angles
-            for a in range(steps):
-                angle = a * np.pi / (2 * steps)
-                R = _rotation(angle)
-                r = ch.q @ R.T if angle else ch.q
-                low = r.min(axis=0)
-                pts.append(r - low)
-                ext.append(r.max(axis=0) - low)
-                lows.append(low)
-                rots.append(R)
-                q_ptr.append(q_ptr[-1] + len(r))
-            entry_ptr.append(entry_ptr[-1] + steps)
-            el = ch.boundary if ch.boundary is not None else ch.F
-            elems.append(np.pad(el, ((0, 0), (0, 3 - el.shape[1])), mode="edge"))
-            el_ptr.append(el_ptr[-1] + len(el))
-            fill.append(ch.boundary is not None)
-        self.Q = np.ascontiguousarray(np.vstack(pts))
-        self.q_ptr = np.array(q_ptr, dtype=np.int64)
-        self.ext = np.ascontiguousarray(np.vstack(ext))
-        self.low = np.vstack(lows)
-        self.rot = np.stack(rots)
-        self.entry_ptr = np.array(entry_ptr, dtype=np.int64)
-        self.elems = np.ascontiguousarray(np.vstack(elems), dtype=np.int64)
-        self.el_ptr = np.array(el_ptr, dtype=np.int64)
-        self.fill = np.array(fill, dtype=np.bool_)
+        n = len(charts)
+        nv = np.array([len(ch.q) for ch in charts])
+        steps = np.where([ch.boxy for ch in charts], 1, angles)
+        self.entry_ptr = np.r_[0, np.cumsum(steps)].astype(np.int64)
+        e_chart = np.repeat(np.arange(n), steps)
+        e_angle = (np.arange(len(e_chart)) - self.entry_ptr[e_chart]) * np.pi / (2 * steps[e_chart])
+        c, s = np.cos(e_angle), np.sin(e_angle)
+        self.rot = np.stack([np.stack([c, -s], 1), np.stack([s, c], 1)], 1)  # (entries, 2, 2)
+        # every entry's points: its chart's q turned by the entry's angle (angle 0: q itself)
+        Q = np.concatenate([ch.q for ch in charts])
+        voff = np.r_[0, np.cumsum(nv)[:-1]]
+        e_n = nv[e_chart]
+        self.q_ptr = np.r_[0, np.cumsum(e_n)].astype(np.int64)
+        rows = np.repeat(voff[e_chart] - self.q_ptr[:-1], e_n) + np.arange(self.q_ptr[-1])
+        x, y = Q[rows, 0], Q[rows, 1]
+        pc, ps = np.repeat(c, e_n), np.repeat(s, e_n)
+        turned = np.repeat(e_angle, e_n) != 0
+        r = np.column_stack(
+            [np.where(turned, pc * x - ps * y, x), np.where(turned, ps * x + pc * y, y)]
+        )
+        self.low = np.minimum.reduceat(r, self.q_ptr[:-1])
+        self.ext = np.ascontiguousarray(np.maximum.reduceat(r, self.q_ptr[:-1]) - self.low)
+        self.Q = np.ascontiguousarray(r - np.repeat(self.low, e_n, axis=0))
+        # elements: the outline (edges as (a, b, b)) where the fill can use it, else triangles
+        elems = [
+            ch.F if ch.boundary is None else ch.boundary[:, [0, 1, 1]] for ch in charts
+        ]  # loop over charts: views
+        self.el_ptr = np.r_[0, np.cumsum([len(e) for e in elems])].astype(np.int64)
+        self.elems = np.ascontiguousarray(np.concatenate(elems), dtype=np.int64)
+        self.fill = np.array([ch.boundary is not None for ch in charts], dtype=np.bool_)
 
     def to_texels(self, i: int, a: int, k: int, s: float) -> np.ndarray:
         """(3, 3) affine from chart i's q to its footprint's texels: angle a, k quarter turns."""
