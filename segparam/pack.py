@@ -106,6 +106,13 @@ _HEADROOM = 2
 # (5 trials cost brain-20k 0.55 points, 4 trials 1.1 points), the first guess as a fraction of
 # the area bound, and the most trials of a rectangle packing that keeps failing.
 _SCALE_TOL = 0.006
+# Many charts (at least _SMOOTH_CHARTS) fill the height a trial needs smoothly as the scale
+# grows, so a fit that uses all but _FULL of the texture's side ends the search: on 2,000
+# triangles it saves 3 of 6 trials at the same utilization (tiny-300 and 600 sphere halves
+# unchanged too). With few charts the height jumps from one scale to the next and a later trial
+# can still fit a larger scale (brain-20k lost 0.55 points with this rule), so they search on.
+_FULL = 0.006
+_SMOOTH_CHARTS = 100
 _MAX_TRIALS = 6
 _FIRST_GUESS = 0.88
 _MAX_SHRINK = 60
@@ -742,11 +749,17 @@ def pack_charts(
             runs = list(pool.map(at_scale, rules))
             placed, fraction, need = _best_run(runs, G)
             logger.debug("pack trial %d: scale %.6g needs %s", n_trials, s, [r[2] for r in runs])
+            full = False
             if placed is not None:
                 lo, best = s, placed
+                full = (
+                    len(charts) >= _SMOOTH_CHARTS
+                    and need is not None
+                    and need - 2 * p >= (G - 2 * p) * (1 - _FULL)
+                )
             else:
                 hi = s
-            if best is not None and (hi / lo <= 1 + _SCALE_TOL or n_trials >= _MAX_TRIALS):
+            if best is not None and (hi / lo <= 1 + _SCALE_TOL or n_trials >= _MAX_TRIALS or full):
                 break
             if placed is None and need is None:
                 guess = s * float(np.clip(np.sqrt(fraction), 0.5, 0.97))
