@@ -715,3 +715,24 @@ def trial(
         result[i, 5] = c
         need = max(need, best_row + r + pad)
     return len(order), result, need
+
+
+def warm_up() -> None:
+    """Load (or, after installing, compile) the compiled trial for both rules on a tiny canvas.
+
+    The first call of a numba function in a process reads its machine code from the cache and
+    links it, ~0.3 s; `segparam.pipeline.build_atlas` does it in a thread while the earlier stages
+    run.
+    """
+    Q = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    ptr = np.array([0, 3], dtype=np.int64)
+    ext = np.array([[1.0, 1.0]])
+    elems = np.array([[0, 1, 1], [1, 2, 2], [2, 0, 0]], dtype=np.int64)
+    el_ptr = np.array([0, 3], dtype=np.int64)
+    fill = np.array([True])
+    order = np.zeros(1, dtype=np.int64)
+    for rule in (REST, HOLES):
+        trial(
+            Q, ptr, ext, elems, el_ptr, fill, ptr[:2] * 0 + np.array([0, 1]), order, 4.0, 16, 24, 1,
+            4, rule, 1, 1e-3, 1e-4, 2, 8, 4, 16, 64, 24,
+        )  # fmt: skip
