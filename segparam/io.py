@@ -902,14 +902,14 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     path.parent.mkdir(parents=True, exist_ok=True)
     prefix = f".{_clip(path.name, 64)}."
     fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=".part", dir=path.parent)
-    os.close(fd)
     tmp_path = Path(tmp)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp creates 0600; give the file the usual mode
-    try:
+    try:  # from here on the temporary file goes, whatever happens (a Ctrl-C included)
+        os.close(fd)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp creates 0600; give the file the usual mode
         yield tmp_path
-        os.replace(tmp_path, path)
+        os.replace(tmp_path, path)  # one rename: the old file or the new one, never neither
     finally:
         tmp_path.unlink(missing_ok=True)
 
@@ -1328,8 +1328,9 @@ def save_atlas(atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: in
 
     The folder is checked first (:func:`check_output_folder`); a stem too long for the file
     system is shortened (:func:`atlas_stem`). Every file is then written into a staging folder
-    inside ``outdir`` and moved into place only when all of them were written, so a failure
-    leaves no partial output.
+    inside ``outdir`` and moved into place only when all of them were written, all or nothing
+    (:func:`staged_outputs`): a failure leaves no partial output, and a rerun into the folder of
+    an earlier atlas that fails or is interrupted (Ctrl-C) leaves the earlier files exactly.
 
     Returns
     -------
@@ -1523,24 +1524,106 @@ def _pad(data: bytes, fill: bytes) -> bytes:
 
 
 @contextlib.contextmanager
+def _ctrl_c_deferred() -> Iterator[None]:
+    """A Ctrl-C that arrives inside the block takes effect when the block is over.
+
+    The block must not be cut short: putting the previous files back. Only the main thread
+    receives Python's ``KeyboardInterrupt`` (and only it may set a signal handler); elsewhere
+    this is a no-op.
+    """
+    import signal
+    import threading
+
+    if (
+        threading.current_thread() is not threading.main_thread()
+        or signal.getsignal(signal.SIGINT) is None  # a handler set from C: leave it alone
+    ):
+        yield
+        return
+    received: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if received:
+            if callable(previous):
+                previous(signal.SIGINT, None)  # Python's default handler raises KeyboardInterrupt
+            elif previous != signal.SIG_IGN:
+                raise KeyboardInterrupt
+
+
+def _swap_in(stage: Path, outdir: Path, names: list[str], backup: Path) -> None:
+    """Move the files ``names`` of ``stage`` into ``outdir``; each file of ``outdir`` they
+    replace is first moved into ``backup`` (all in one folder tree: every move is a rename)."""
+    for name in names:
+        target = outdir / name
+        if os.path.lexists(target):
+            os.replace(target, backup / name)
+        os.replace(stage / name, target)
+
+
+def _swap_out(stage: Path, outdir: Path, names: list[str], backup: Path) -> list[str]:
+    """Undo :func:`_swap_in`, however far it got: the new files go back to ``stage``, the
+    previous ones from ``backup`` to ``outdir``. The state is read from the files, not from a
+    record of the moves, so an interruption between a move and its bookkeeping cannot mislead
+    it. Returns the names that could not be put back (their previous file stays in ``backup``).
+    """
+    failed = []
+    for name in names:
+        target, new, old = outdir / name, stage / name, backup / name
+        try:
+            if not os.path.lexists(new) and os.path.lexists(target):
+                os.replace(target, new)  # the new file had been moved in: out again
+            if os.path.lexists(old):
+                os.replace(old, target)  # the previous file had been set aside: back
+        except OSError:
+            failed.append(name)
+    return failed
+
+
+@contextlib.contextmanager
 def staged_outputs(outdir: str | os.PathLike) -> Iterator[Path]:
     """Yield a staging folder inside ``outdir``; move everything in it into ``outdir`` only if
-    the block succeeds, all or nothing (also on Ctrl-C between two moves)."""
+    the block succeeds, all or nothing (also on Ctrl-C between two moves).
+
+    The block writes its files into the staging folder. Then each file of ``outdir`` that one
+    of them replaces is moved aside into the staging folder and the new file moved into its
+    place (renames within one file system). If anything fails or is interrupted before the last
+    move, every new file is taken out and every previous file put back, so ``outdir`` is
+    exactly what it was (files of other names are never touched); the previous files are
+    deleted only once every move has succeeded. The staging folder is always removed, except
+    when a previous file could not be put back (a :class:`MeshFileError` then says where it is).
+    """
     import shutil
 
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=".segparam-", dir=outdir))
+    keep = False
     try:
         yield stage
-        written: list[Path] = []
+        names = sorted(path.name for path in stage.iterdir())  # every file exists
+        backup = Path(tempfile.mkdtemp(prefix=".previous-", dir=stage))
         try:
-            for path in sorted(stage.iterdir()):  # every file exists: move them into place
-                os.replace(path, outdir / path.name)
-                written.append(outdir / path.name)
-        except BaseException:
-            for done in written:
-                done.unlink(missing_ok=True)
+            _swap_in(stage, outdir, names, backup)
+        except BaseException as exc:
+            with _ctrl_c_deferred():
+                failed = _swap_out(stage, outdir, names, backup)
+                keep = bool(failed)  # then the previous files stay where they are
+            if failed:
+                raise MeshFileError(
+                    f"{outdir}: moving the new files in failed ({_reason_of(exc)}), and so did "
+                    f"putting back {', '.join(failed)}; the previous files are kept in {backup}"
+                ) from exc
             raise
     finally:
-        shutil.rmtree(stage, ignore_errors=True)
+        if not keep:
+            with _ctrl_c_deferred():
+                shutil.rmtree(stage, ignore_errors=True)
+
+
+def _reason_of(exc: BaseException) -> str:
+    if isinstance(exc, OSError):
+        return _reason(exc)
+    return type(exc).__name__

@@ -51,7 +51,14 @@ from numpy.typing import ArrayLike
 from scipy.spatial import ConvexHull, QhullError
 
 from segparam import canvas
-from segparam.errors import ConfigError, InvalidMeshError, SolverError
+from segparam.errors import (
+    ConfigError,
+    InvalidMeshError,
+    SolverError,
+    check_bool,
+    check_choice,
+    check_int,
+)
 from segparam.raster import footprint_conflicts, rasterize_footprint
 
 __all__ = [
@@ -66,6 +73,9 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 _METHODS = ("raster", "rect")
+#: Largest texture side accepted (texels): the uv-layout image and the packer's canvases grow with
+#: its square (16384: a 0.8 GB image).
+MAX_RESOLUTION = 16384
 # Tolerance (in texels) of the rasterizer used to place charts. It is larger than the one of
 # the public `rasterize_footprint`, so that round-off in composing the final affine maps can
 # never make a verified footprint larger than the footprint that was packed.
@@ -153,19 +163,22 @@ class PackConfig:
     angle_steps: int = 6
 
     def __post_init__(self) -> None:
-        if not isinstance(self.resolution, (int, np.integer)) or self.resolution < 1:
-            raise ConfigError(f"resolution must be a positive integer, got {self.resolution!r}")
-        if not isinstance(self.padding, (int, np.integer)) or self.padding < 0:
-            raise ConfigError(f"padding must be a non-negative integer, got {self.padding!r}")
+        # the same checks (and messages) as every stage's config; stored as plain Python values
+        object.__setattr__(self, "resolution", check_int("resolution", self.resolution, low=1))
+        if self.resolution > MAX_RESOLUTION:
+            raise ConfigError(
+                f"resolution is {self.resolution}; it must be at most {MAX_RESOLUTION}, the limit "
+                "(the uv picture and the packer's canvases grow with its square)"
+            )
+        object.__setattr__(self, "padding", check_int("padding", self.padding, low=0))
+        object.__setattr__(self, "angle_steps", check_int("angle_steps", self.angle_steps, low=1))
+        object.__setattr__(self, "rotate", check_bool("rotate", self.rotate))
+        check_choice("method", self.method, _METHODS)
         if self.resolution <= 2 * self.padding:
             raise ConfigError(
                 f"resolution {self.resolution} leaves no texel inside a border padding of "
                 f"{self.padding} texels on each side"
             )
-        if not isinstance(self.angle_steps, (int, np.integer)) or self.angle_steps < 1:
-            raise ConfigError(f"angle_steps must be a positive integer, got {self.angle_steps!r}")
-        if self.method not in _METHODS:
-            raise ConfigError(f"method must be one of {_METHODS}, got {self.method!r}")
 
 
 @dataclass(frozen=True)

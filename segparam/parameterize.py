@@ -36,7 +36,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components as graph_components
 from scipy.spatial import cKDTree
 
-from .errors import InvalidMeshError
+from .errors import InvalidMeshError, check_choice, check_int
 from .linalg import smallest_eigenpairs, spd_solver
 from .mesh import (
     boundary_edges,
@@ -354,15 +354,14 @@ def tangent_frames(
     -------
     b1, b2 : (n, 3) float64 ndarray
     """
+    tangent = check_choice("tangent", tangent, TANGENTS)
     if tangent == "normals":
         normal = vertex_normals(V, F)
         flat = np.linalg.norm(normal, axis=1) < 0.5  # adjacent normals cancel: fall back to PCA
         if flat.any():
             normal[flat] = _pca_normals(V, ptr, idx)[flat]
-    elif tangent == "pca":
+    else:  # "pca"
         normal = _pca_normals(V, ptr, idx)
-    else:
-        raise ValueError(f"tangent must be one of {TANGENTS}, got {tangent!r}")
     helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
     b1 = np.cross(normal, helper)
     b1 /= np.linalg.norm(b1, axis=1, keepdims=True)
@@ -737,10 +736,10 @@ class HessianSolver:
         min_points: int = MIN_POINTS,
         n_neighbors: int = 12,
     ) -> None:
-        if method not in METHODS:
-            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-        if tangent not in TANGENTS:
-            raise ValueError(f"tangent must be one of {TANGENTS}, got {tangent!r}")
+        method = check_choice("method", method, METHODS)
+        tangent = check_choice("tangent", tangent, TANGENTS)
+        min_points = check_int("min_points", min_points, low=MIN_POINTS)
+        n_neighbors = check_int("n_neighbors", n_neighbors, low=MIN_POINTS)
         self.V, self.F = check_chart(V, F)
         self.method, self.tangent = method, tangent
         # Work in units of the typical edge length, centred: the map is invariant under rigid
@@ -765,8 +764,9 @@ class HessianSolver:
         fewer flipped triangles. A map that is already rigid (see :func:`arap_refine`) is not
         refined. ``refine="none"`` returns the paper's map as it is.
         """
-        if refine not in REFINES:
-            raise ValueError(f"refine must be one of {REFINES}, got {refine!r}")
+        seed = check_int("seed", seed, low=0)
+        refine = check_choice("refine", refine, REFINES)
+        refine_iterations = check_int("refine_iterations", refine_iterations, low=0)
         t0 = time.perf_counter()
         guess = np.column_stack([np.ones(len(self._Vn)), self._Vn])
         Y, values = hessian_eigenmap(self.K, seed=seed, guess=guess)
@@ -850,6 +850,10 @@ def parameterize_chart(
     InvalidMeshError
         If the chart cannot be parameterized (closed, several components, non-manifold, fewer
         than 6 vertices, ...), with the reason.
+    ConfigError
+        If an option is not one of its choices, not an integer where one is asked (a bool is
+        not), or out of range (``min_points`` and ``n_neighbors`` at least 6, ``seed`` >= 0);
+        checked before any work. Also a ``ValueError``.
 
     References
     ----------
@@ -1290,8 +1294,9 @@ def solve_charts(
     -------
     ChartMaps
     """
-    if refine not in REFINES:
-        raise ValueError(f"refine must be one of {REFINES}, got {refine!r}")
+    tangent = check_choice("tangent", tangent, TANGENTS)
+    refine = check_choice("refine", refine, REFINES)
+    refine_iterations = check_int("refine_iterations", refine_iterations, low=0)
     vert_chart = np.asarray(vert_chart, dtype=np.int64)
     n_charts = int(vert_chart[-1]) + 1
     size = np.bincount(vert_chart, minlength=n_charts)

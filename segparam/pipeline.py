@@ -11,6 +11,7 @@ import dataclasses
 import logging
 import os
 import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -23,7 +24,7 @@ from . import __version__
 from .clean import CleanResult, clean
 from .errors import ConfigError, InvalidMeshError
 from .mesh import boundary_edges, connected_components, face_areas, unit_frame
-from .pack import PackConfig, PackResult, pack_charts
+from .pack import MAX_RESOLUTION, PackConfig, PackResult, pack_charts
 from .quality import distortion, signed_areas
 from .remesh import RemeshConfig, RemeshResult, remesh
 from .segment import Segmentation, SegmentConfig, segment
@@ -53,9 +54,6 @@ __all__ = [
 #: Largest input accepted (faces): a guard against running out of memory (about 3 KB per face
 #: peak in the stages; 24 GB machines manage ~5M faces).
 MAX_FACES = 5_000_000
-#: Largest texture side accepted (texels): the uv-layout image and the packer's canvases grow with
-#: its square (16384: a 0.8 GB image).
-MAX_RESOLUTION = 16384
 #: Seeds are 32-bit (numpy's legacy RandomState, which seeds the clustering, takes 0 .. 2**32 - 1).
 MAX_SEED = 2**32 - 1
 
@@ -97,9 +95,22 @@ def _check_room(n_charts: int, pack: PackConfig, what: str) -> None:
         )
 
 
+_SECTIONS = {
+    "remesh": RemeshConfig,
+    "segment": SegmentConfig,
+    "split": SplitConfig,
+    "pack": PackConfig,
+}
+
+
 @dataclass(frozen=True)
 class PipelineConfig:
-    """Every stage's options. Load from TOML with :func:`load_config`."""
+    """Every stage's options. Load from TOML with :func:`load_config`.
+
+    Every field of every section is checked when the section is built (type, range, choices:
+    :class:`~segparam.errors.ConfigError` naming the field); here, that each section is its
+    config class.
+    """
 
     remesh: RemeshConfig = field(default_factory=RemeshConfig)
     segment: SegmentConfig = field(default_factory=SegmentConfig)
@@ -107,10 +118,12 @@ class PipelineConfig:
     pack: PackConfig = field(default_factory=PackConfig)
 
     def __post_init__(self) -> None:
-        if self.pack.resolution > MAX_RESOLUTION:
-            raise ConfigError(
-                f"[pack] resolution {self.pack.resolution} is above the limit {MAX_RESOLUTION}"
-            )
+        for name, cls in _SECTIONS.items():
+            value = getattr(self, name)
+            if not isinstance(value, cls):
+                raise ConfigError(
+                    f"[{name}] must be a {cls.__name__}, got {type(value).__name__} {value!r}"
+                )
 
     def as_dict(self) -> dict[str, dict[str, Any]]:
         """Plain dictionary, one table per stage (the TOML layout)."""
@@ -122,20 +135,20 @@ class PipelineConfig:
         for name, values in sections.items():
             if name not in data:
                 raise ConfigError(f"unknown config section [{name}]; known: {', '.join(data)}")
+            if not isinstance(values, dict):
+                raise ConfigError(f"[{name}] must be a table (a dict), got {values!r}")
             data[name].update(values)
         return config_from_dict(data)
 
 
-_SECTIONS = {
-    "remesh": RemeshConfig,
-    "segment": SegmentConfig,
-    "split": SplitConfig,
-    "pack": PackConfig,
-}
-
-
 def config_from_dict(data: dict[str, Any], *, source: str = "config") -> PipelineConfig:
-    """Build a :class:`PipelineConfig`; unknown sections or keys are a :class:`ConfigError`."""
+    """Build a :class:`PipelineConfig` from ``{table: {key: value}}`` (the TOML layout).
+
+    Unknown sections or keys, values of the wrong type and values out of range are a
+    :class:`ConfigError` of one line naming ``source``, the ``[table]`` and the key.
+    """
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: must be a table of tables, got {type(data).__name__}")
     kwargs = {}
     for name, values in data.items():
         if name not in _SECTIONS:
@@ -389,6 +402,10 @@ def build_atlas(
             f"mesh has {n_faces} faces; the limit is {MAX_FACES} (about 3 KB of memory per face)"
         )
     timings: dict[str, float] = {}
+    # the packer's compiled code loads (~0.3 s) in a thread while the other stages run
+    warm = threading.Thread(target=_warm_packer, daemon=True)
+    if cfg.pack.method == "raster":
+        warm.start()
 
     t = time.perf_counter()
     cleaned = clean(V, F)
@@ -422,6 +439,8 @@ def build_atlas(
     )
     timings["parameterize"] = time.perf_counter() - t
 
+    if warm.is_alive():
+        warm.join()
     return pack_atlas(
         Vm,
         Fm,
@@ -433,6 +452,17 @@ def build_atlas(
         cleaning=cleaned,
         remeshing=remeshed,
     )
+
+
+def _warm_packer() -> None:
+    """Load the packer's compiled kernels; a failure here shows again, with its message, when the
+    pack stage runs."""
+    try:
+        from .canvas import warm_up
+
+        warm_up()
+    except Exception:  # noqa: BLE001 - the pack stage reports it
+        log.debug("warming up the packer failed", exc_info=True)
 
 
 def pack_atlas(

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .errors import ConfigError, InvalidMeshError
+from .errors import ConfigError, InvalidMeshError, check_choice, check_int, check_number
 from .mesh import (
     angle_defect,
     boundary_edges,
@@ -101,15 +101,21 @@ class RemeshConfig:
         ``"auto"`` remeshes only when :func:`should_remesh` says so; ``"on"`` always; ``"off"``
         never (the input vertices are kept, ``--no-remesh``).
     target_edge : float or None
-        Target edge length in mesh units; ``None`` uses :func:`equal_area_edge` (the edge of an
-        equilateral mesh with the input's area and face count), so that the vertex count stays
-        about the same.
+        Target edge length in mesh units (finite, > 0); ``None`` uses :func:`equal_area_edge`
+        (the edge of an equilateral mesh with the input's area and face count), so that the
+        vertex count stays about the same.
     feature_angle : float
-        Edges whose dihedral angle exceeds this (degrees) are sharp features and kept; so are
-        vertices whose angle defect exceeds that of a cone whose opposite sides meet at this
-        angle (:func:`sharp_vertices`).
+        Edges whose dihedral angle exceeds this (degrees, 0 to 180) are sharp features and
+        kept; so are vertices whose angle defect exceeds that of a cone whose opposite sides
+        meet at this angle (:func:`sharp_vertices`).
     iterations : int
-        Split / collapse / flip / smooth rounds.
+        Split / collapse / flip / smooth rounds, 1 to 1000.
+
+    Raises
+    ------
+    ConfigError
+        If a field has the wrong type (an integer where a number is asked is fine, a bool never
+        is) or is out of range; the message names the field.
     """
 
     mode: str = "auto"
@@ -118,20 +124,18 @@ class RemeshConfig:
     iterations: int = 10
 
     def __post_init__(self) -> None:
-        if self.mode not in MODES:
-            raise ConfigError(f"remesh mode is {self.mode!r}; expected one of {MODES}")
-        if self.target_edge is not None and not (
-            np.isfinite(self.target_edge) and self.target_edge > 0
-        ):
-            raise ConfigError(f"remesh target_edge is {self.target_edge}; it must be > 0")
-        if not (np.isfinite(self.feature_angle) and 0 <= self.feature_angle <= 180):
-            raise ConfigError(
-                f"remesh feature_angle is {self.feature_angle} degrees; it must be in [0, 180]"
-            )
-        if int(self.iterations) != self.iterations or not 1 <= self.iterations <= 1000:
-            raise ConfigError(
-                f"remesh iterations is {self.iterations}; it must be an integer in [1, 1000]"
-            )
+        # Every field, type first (bool is not a number here); numbers are stored as plain
+        # int / float. Messages start with the key: config_from_dict adds the file and [remesh].
+        checked = {
+            "mode": check_choice("mode", self.mode, MODES),
+            "target_edge": check_number(
+                "target_edge", self.target_edge, low=0, low_open=True, optional=True
+            ),
+            "feature_angle": check_number("feature_angle", self.feature_angle, low=0, high=180),
+            "iterations": check_int("iterations", self.iterations, low=1, high=1000),
+        }
+        for name, value in checked.items():
+            object.__setattr__(self, name, value)
 
 
 @dataclass(frozen=True)

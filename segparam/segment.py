@@ -49,7 +49,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.special import ive
 from threadpoolctl import threadpool_limits
 
-from .errors import ConfigError
+from .errors import check_int, check_number
 from .linalg import DENSE_LIMIT, smallest_eigenpairs, spd_solver
 from .mesh import (
     boundary_edges,
@@ -97,6 +97,8 @@ SPECTRAL_SHIFT = -1e-5
 #: brain, three 20k-face brain-like surfaces and a 100k one's proxy graph, for 7, 12 and 20
 #: clusters, 1e-6 gives the same labels as 0 with 20-45% fewer solves.
 SPECTRAL_TOL = 1e-6
+#: Largest ``n_charts`` / ``max_charts`` accepted (the CLI's ``--max-charts`` limit too).
+MAX_CHARTS = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -106,30 +108,37 @@ class SegmentConfig:
     Attributes
     ----------
     n_charts : int or None
-        Fixed number of charts; default from the curvature.
+        Fixed number of charts (1 to ``MAX_CHARTS``); default from the curvature.
     curvature_per_chart : float
-        Integrated ``|K|`` (radians) per chart when ``n_charts`` is None: a hemisphere carries
-        ``2 pi``.
+        Integrated ``|K|`` (radians, > 0) per chart when ``n_charts`` is None: a hemisphere
+        carries ``2 pi``.
     max_charts : int
-        Upper bound on the number of clustered charts (the split stage may add more).
+        Upper bound on the number of clustered charts (1 to ``MAX_CHARTS``; the split stage may
+        add more).
     max_chart_faces : int
         Clustering makes at least ``faces / max_chart_faces`` charts (keeps each solve fast).
     concave_weight, convex_weight : float
-        Scale of the angular distance for concave and convex edges.
+        Scale (> 0) of the angular distance for concave and convex edges.
     proxy_faces : int
-        Above this many faces, cluster a proxy graph of about this many cells.
+        Above this many faces (>= 1), cluster a proxy graph of about this many cells.
     smoothing : int
         Passes of the majority filter that straightens chart borders (0: none).
     rounding : float
-        Diffusion time, in random-walk steps on the face graph, of the threshold dynamics that
-        round the charts after clustering (0: none). Borders are smoothed over about
+        Diffusion time (finite, >= 0), in random-walk steps on the face graph, of the threshold
+        dynamics that round the charts after clustering (0: none). Borders are smoothed over about
         ``sqrt(rounding)`` rings of faces: lobes and spurs recede, so the flattened charts fill
         more of their convex hulls and pack tighter. The scale is in faces, so on finer meshes
         it rounds relatively less (and costs no more per face).
     feature_angle : float
-        Degrees. Edges whose faces' normals differ by more than this are sharp; regions that
-        sharp edges enclose completely (the faces of a CAD part) are charted separately, never
-        across their outline. 180 turns this off.
+        Degrees, in (0, 180]. Edges whose faces' normals differ by more than this are sharp;
+        regions that sharp edges enclose completely (the faces of a CAD part) are charted
+        separately, never across their outline. 180 turns this off.
+
+    Raises
+    ------
+    ConfigError
+        If a field has the wrong type (an integer where a number is asked is fine, a bool never
+        is) or is out of range; the message names the field.
     """
 
     n_charts: int | None = None
@@ -144,20 +153,23 @@ class SegmentConfig:
     rounding: float = 128.0
 
     def __post_init__(self) -> None:
-        if self.n_charts is not None and self.n_charts < 1:
-            raise ConfigError(f"n_charts is {self.n_charts}; it must be at least 1")
+        # Every field, type first (bool is not a number here); numbers are stored as plain
+        # int / float. Messages start with the key: config_from_dict adds the file and [segment].
+        checked = {
+            "n_charts": check_int("n_charts", self.n_charts, low=1, high=MAX_CHARTS, optional=True),
+            "max_charts": check_int("max_charts", self.max_charts, low=1, high=MAX_CHARTS),
+            "max_chart_faces": check_int("max_chart_faces", self.max_chart_faces, low=1),
+            "proxy_faces": check_int("proxy_faces", self.proxy_faces, low=1),
+            "smoothing": check_int("smoothing", self.smoothing, low=0),
+        }
         for name in ("curvature_per_chart", "concave_weight", "convex_weight"):
-            if not getattr(self, name) > 0:
-                raise ConfigError(f"{name} is {getattr(self, name)}; it must be positive")
-        if self.smoothing < 0:
-            raise ConfigError(f"smoothing is {self.smoothing}; it must be >= 0")
-        if not (np.isfinite(self.rounding) and self.rounding >= 0):
-            raise ConfigError(f"rounding is {self.rounding}; it must be finite and >= 0")
-        if not 0 < self.feature_angle <= 180:
-            raise ConfigError(f"feature_angle is {self.feature_angle}; it must be in (0, 180]")
-        for name in ("max_charts", "max_chart_faces", "proxy_faces"):
-            if getattr(self, name) < 1:
-                raise ConfigError(f"{name} is {getattr(self, name)}; it must be at least 1")
+            checked[name] = check_number(name, getattr(self, name), low=0, low_open=True)
+        checked["rounding"] = check_number("rounding", self.rounding, low=0)
+        checked["feature_angle"] = check_number(
+            "feature_angle", self.feature_angle, low=0, high=180, low_open=True
+        )
+        for name, value in checked.items():
+            object.__setattr__(self, name, value)
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import ConfigError, InvalidMeshError
+from .errors import InvalidMeshError, check_choice, check_int, check_number
 from .linalg import DENSE_LIMIT
 from .mesh import (
     check_mesh,
@@ -48,7 +48,9 @@ from .mesh import (
 )
 from .parameterize import (
     MAX_EXTEND,
+    METHODS,
     MIN_POINTS,
+    TANGENTS,
     charts_quality,
     parameterize_chart,
     quality_records,
@@ -81,17 +83,25 @@ class SplitConfig:
 
     Attributes
     ----------
-    method, tangent : str
+    method : {"hessian", "classic-hlle"}
+    tangent : {"normals", "pca"}
         Passed to the solver.
     max_depth : int
-        Most bisections of one segmentation chart before the planar fallback takes over.
+        Most bisections (>= 0) of one segmentation chart before the planar fallback takes over.
     max_distortion : float or None
-        Angle-distortion target: a bijective chart above it is split too (None: no target).
+        Angle-distortion target (finite, >= 1): a bijective chart above it is split too (None:
+        no target).
     min_faces : int
-        Pieces with fewer faces skip the solver and use the planar projection.
+        Pieces with fewer faces (>= 1) skip the solver and use the planar projection.
     n_jobs : int
         Worker processes for meshes of at least ``PARALLEL_MIN_FACES`` faces (0: one per CPU,
         1: none). Charts are independent, so the result does not depend on it.
+
+    Raises
+    ------
+    ConfigError
+        If a field has the wrong type (an integer where a number is asked is fine, a bool never
+        is) or is out of range; the message names the field.
     """
 
     method: str = "hessian"
@@ -102,14 +112,20 @@ class SplitConfig:
     n_jobs: int = 0
 
     def __post_init__(self) -> None:
-        if self.max_depth < 0:
-            raise ConfigError(f"max_depth is {self.max_depth}; it must be >= 0")
-        if self.max_distortion is not None and not self.max_distortion >= 1:
-            raise ConfigError(f"max_distortion is {self.max_distortion}; it must be >= 1")
-        if self.min_faces < 1:
-            raise ConfigError(f"min_faces is {self.min_faces}; it must be >= 1")
-        if self.n_jobs < 0:
-            raise ConfigError(f"n_jobs is {self.n_jobs}; it must be >= 0 (0: one per CPU)")
+        # Every field, type first (bool is not a number here); numbers are stored as plain
+        # int / float. Messages start with the key: config_from_dict adds the file and [split].
+        checked = {
+            "method": check_choice("method", self.method, METHODS),
+            "tangent": check_choice("tangent", self.tangent, TANGENTS),
+            "max_depth": check_int("max_depth", self.max_depth, low=0),
+            "max_distortion": check_number(
+                "max_distortion", self.max_distortion, low=1, optional=True
+            ),
+            "min_faces": check_int("min_faces", self.min_faces, low=1),
+            "n_jobs": check_int("n_jobs", self.n_jobs, low=0),
+        }
+        for name, value in checked.items():
+            object.__setattr__(self, name, value)
 
 
 @dataclass(frozen=True)
