@@ -59,6 +59,7 @@ from segparam.errors import (
     check_choice,
     check_int,
 )
+from segparam.quality import signed_areas
 from segparam.raster import footprint_conflicts, rasterize_footprint
 
 __all__ = [
@@ -300,13 +301,6 @@ def _min_area_angle(uv: np.ndarray) -> tuple[float, float]:
     return float(np.arctan2(np.sin(angle), np.cos(angle))), float(hull.volume / area[best])
 
 
-def _triangle_areas(uv: np.ndarray, F: np.ndarray) -> np.ndarray:
-    a, b, c = uv[F[:, 0]], uv[F[:, 1]], uv[F[:, 2]]
-    return 0.5 * (
-        (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-    )
-
-
 # ----------------------------------------------------------------------------------------------
 # validation and canonical frames
 
@@ -371,7 +365,7 @@ def _prepare(
             f"chart {i} has 3-D area {float(areas[i])}; every chart needs a positive one"
         )
     G = Fl + voff[fchart][:, None]  # faces into U
-    signed = _triangle_areas(U, G)
+    signed = signed_areas(U, G)
     area_uv = np.bincount(fchart, np.abs(signed), minlength=n)
     span = (np.maximum.reduceat(U, voff) - np.minimum.reduceat(U, voff)).max(axis=1)
     bad = ~(area_uv > 1e-14 * span * span)
@@ -396,7 +390,7 @@ def _prepare(
     flip = (np.bincount(fchart, signed, minlength=n) < 0)[fchart]  # keep the faces ccw
     G[flip] = G[flip][:, [0, 2, 1]]
     # the outline rasterizer needs every triangle counter-clockwise (no flip, no sliver)
-    ccw = np.bincount(fchart, _triangle_areas(Q, G) <= 0, minlength=n) == 0
+    ccw = np.bincount(fchart, signed_areas(Q, G) <= 0, minlength=n) == 0
     outlines = _outlines(G, fchart, voff, ccw, len(U))
     return [
         _Chart(
@@ -814,7 +808,7 @@ def _finish(
         transforms[ch.index] = M[:2]
         uv = ch.uv @ M[:2, :2].T + M[:2, 2]
         out_uvs.append(uv)
-        area += float(np.abs(_triangle_areas(uv, ch.F)).sum())
+        area += float(np.abs(signed_areas(uv, ch.F)).sum())
     logger.info(
         "packed %d charts (%s) at %dx%d, padding %d: utilization %.4f after %d trials",
         len(charts),

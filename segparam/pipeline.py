@@ -7,13 +7,14 @@ also a public function of its own module. Configurations are frozen dataclasses 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import os
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -407,37 +408,33 @@ def build_atlas(
     if cfg.pack.method == "raster":
         warm.start()
 
-    t = time.perf_counter()
-    cleaned = clean(V, F)
-    timings["clean"] = time.perf_counter() - t
+    with _timed(timings, "clean"):
+        cleaned = clean(V, F)
     report("clean", 1, 1)
     if len(cleaned.F) > chart_room(cfg.pack.resolution, cfg.pack.padding):
         # Charts are connected: at least one per connected piece (counted only when it can matter).
         pieces = connected_components(cleaned.F)[0]
         _check_room(pieces, cfg.pack, f"the mesh has {pieces} connected pieces, so at least")
 
-    t = time.perf_counter()
-    remeshed = remesh(cleaned.V, cleaned.F, config=cfg.remesh)
-    timings["remesh"] = time.perf_counter() - t
+    with _timed(timings, "remesh"):
+        remeshed = remesh(cleaned.V, cleaned.F, config=cfg.remesh)
     Vm, Fm = remeshed.V, remeshed.F
     report("remesh", 1, 1)
 
-    t = time.perf_counter()
-    seg = segment(Vm, Fm, config=cfg.segment, seed=seed)
-    timings["segment"] = time.perf_counter() - t
+    with _timed(timings, "segment"):
+        seg = segment(Vm, Fm, config=cfg.segment, seed=seed)
     report("segment", 1, 1)
     _check_room(seg.n_charts, cfg.pack, "the segmentation made")  # splitting only adds charts
 
-    t = time.perf_counter()
-    chart_set = parameterize_charts(
-        Vm,
-        Fm,
-        seg.labels,
-        config=cfg.split,
-        seed=seed,
-        progress=lambda done: report("parameterize", done, seg.n_charts),
-    )
-    timings["parameterize"] = time.perf_counter() - t
+    with _timed(timings, "parameterize"):
+        chart_set = parameterize_charts(
+            Vm,
+            Fm,
+            seg.labels,
+            config=cfg.split,
+            seed=seed,
+            progress=lambda done: report("parameterize", done, seg.n_charts),
+        )
 
     if warm.is_alive():
         warm.join()
@@ -452,6 +449,14 @@ def build_atlas(
         cleaning=cleaned,
         remeshing=remeshed,
     )
+
+
+@contextlib.contextmanager
+def _timed(timings: dict[str, float], stage: str) -> Iterator[None]:
+    """Record the wall seconds of the block as ``timings[stage]``."""
+    start = time.perf_counter()
+    yield
+    timings[stage] = time.perf_counter() - start
 
 
 def _warm_packer() -> None:
@@ -494,15 +499,14 @@ def pack_atlas(
     timings = dict(timings or {})
     charts = chart_set.charts
     _check_room(len(charts), cfg.pack, "there are")
-    t = time.perf_counter()
-    area = face_areas(V, F)
-    packing = pack_charts(
-        [c.uv for c in charts],
-        [c.local_F for c in charts],
-        [float(area[c.faces].sum()) for c in charts],
-        config=cfg.pack,
-    )
-    timings["pack"] = time.perf_counter() - t
+    with _timed(timings, "pack"):
+        area = face_areas(V, F)
+        packing = pack_charts(
+            [c.uv for c in charts],
+            [c.local_F for c in charts],
+            [float(area[c.faces].sum()) for c in charts],
+            config=cfg.pack,
+        )
 
     sizes = np.array([len(c.vertices) for c in charts])
     offsets = np.r_[0, np.cumsum(sizes)[:-1]]
