@@ -42,7 +42,6 @@ from .linalg import smallest_eigenpairs, spd_solver
 from .mesh import (
     boundary_edges,
     check_mesh,
-    corner_angles,
     edges,
     face_areas,
     is_edge_manifold,
@@ -51,9 +50,9 @@ from .mesh import (
     vertex_normals,
 )
 from .quality import (
-    ANGLE_TOL,
     DEGENERATE_AREA,
     ChartQuality,
+    angle_sum_violations,
     chart_quality,
     inverse_frames,
     jacobians,
@@ -952,13 +951,7 @@ def charts_quality(
     )
     flipped = (sa < 0) & ~degenerate
 
-    angle_sum = np.bincount(F.ravel(), weights=corner_angles(uv, F).ravel(), minlength=n)
-    B = boundary_edges(F)
-    on_boundary = np.zeros(n, dtype=bool)
-    on_boundary[B.ravel()] = True
-    used = np.bincount(F.ravel(), minlength=n) > 0
-    interior_bad = used & ~on_boundary & (np.abs(angle_sum - 2 * np.pi) > ANGLE_TOL)
-    boundary_bad = on_boundary & (angle_sum > 2 * np.pi + ANGLE_TOL)
+    interior_bad, boundary_bad, B = angle_sum_violations(uv, F, n)
 
     out = {
         "n_flipped": np.bincount(face_chart, weights=flipped, minlength=n_charts).astype(np.int64),

@@ -224,6 +224,25 @@ def _loop_area(uv: np.ndarray, loop: np.ndarray) -> float:
     return 0.5 * float((p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]).sum())
 
 
+def angle_sum_violations(
+    uv: np.ndarray, F: np.ndarray, n: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertices where the uv map is not locally injective, from the uv angle sums around them.
+
+    Returns (interior_bad, boundary_bad, B): an interior vertex whose angles do not sum to 2 pi
+    (within `ANGLE_TOL`), a boundary vertex whose angles sum to more than 2 pi, and the boundary
+    edges ``B`` (of any number of charts: the faces ``F`` may hold several).
+    """
+    angle_sum = np.bincount(F.ravel(), weights=corner_angles(uv, F).ravel(), minlength=n)
+    B = boundary_edges(F)
+    on_boundary = np.zeros(n, dtype=bool)
+    on_boundary[B.ravel()] = True
+    used = np.bincount(F.ravel(), minlength=n) > 0
+    interior_bad = used & ~on_boundary & (np.abs(angle_sum - 2 * np.pi) > ANGLE_TOL)
+    boundary_bad = on_boundary & (angle_sum > 2 * np.pi + ANGLE_TOL)
+    return interior_bad, boundary_bad, B
+
+
 def chart_quality(
     V: np.ndarray, F: np.ndarray, uv: np.ndarray, inv_frames: np.ndarray | None = None
 ) -> ChartQuality:
@@ -249,13 +268,7 @@ def chart_quality(
 
     # Local injectivity from uv angle sums.
     n = len(V)
-    angle_sum = np.bincount(F.ravel(), weights=corner_angles(uv, F).ravel(), minlength=n)
-    B = boundary_edges(F)
-    on_boundary = np.zeros(n, dtype=bool)
-    on_boundary[B.ravel()] = True
-    used = np.bincount(F.ravel(), minlength=n) > 0
-    interior_bad = used & ~on_boundary & (np.abs(angle_sum - 2 * np.pi) > ANGLE_TOL)
-    boundary_bad = on_boundary & (angle_sum > 2 * np.pi + ANGLE_TOL)
+    interior_bad, boundary_bad, B = angle_sum_violations(uv, F, n)
     n_branch = int((interior_bad | boundary_bad).sum())
 
     n_cross = boundary_crossings(uv, B)
