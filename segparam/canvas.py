@@ -14,9 +14,13 @@ search, so that an over-full trial still reports how much height it needed):
 ``sky[j]``
     One more than the highest forbidden texel of column j below the top border (the canvas
     height in the side borders): everything above it is free.
-``coarse``, ``prefix``, ``max_free``
+``sky_min``
+    The skyline's minimum per block of `_SKY_BLOCK` columns (the resting search skips blocks).
+``coarse``, ``prefix``, ``max_free``, ``free_bits``
     ``forbid`` pooled into blocks of ``block x block`` texels ("any"), its row-wise prefix
-    sums (so that a run of cells is tested in O(1)) and each coarse row's longest free run.
+    sums (so that a run of cells is tested in O(1)), each coarse row's longest free run, and its
+    free cells as bit sets (64 a word). All of these are derived from ``forbid`` and ``sky`` and
+    refreshed where a placement changes them.
 
 Placement rules (``rule``):
 
@@ -242,58 +246,48 @@ def fits(forbid, height, width, mask, rows, cols, row, col):  # pragma: no cover
 
 
 @njit(cache=True, nogil=True)
+def _leading_edge(mask, rows, cols, di, dj):  # pragma: no cover - compiled
+    """Cells (i, j) of the footprint whose neighbour (i + di, j + dj) is not in it: the texels
+    that a one-texel move by (di, dj) newly covers."""
+    n = 0
+    edge = np.empty((rows * cols, 2), dtype=np.int64)
+    for i in range(rows):
+        for j in range(cols):
+            if mask[i, j]:
+                ni, nj = i + di, j + dj
+                if ni < 0 or nj < 0 or ni >= rows or nj >= cols or not mask[ni, nj]:
+                    edge[n, 0] = i
+                    edge[n, 1] = j
+                    n += 1
+    return edge[:n]
+
+
+@njit(cache=True, nogil=True)
+def _clear(forbid, cells, row, col):  # pragma: no cover - compiled
+    """Whether no cell of `cells`, shifted to (row, col), is forbidden."""
+    for t in range(len(cells)):
+        if forbid[row + cells[t, 0], col + cells[t, 1]]:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
 def slide(forbid, mask, rows, cols, row, col, max_steps):  # pragma: no cover - compiled
     """Move a fitting footprint down, then left, one texel at a time while it fits.
 
     Only the texels a move newly covers are tested: the footprint's lower (left) edges.
     """
-    n_down = 0
-    n_left = 0
-    for i in range(rows):
-        for j in range(cols):
-            if mask[i, j]:
-                if i == 0 or not mask[i - 1, j]:
-                    n_down += 1
-                if j == 0 or not mask[i, j - 1]:
-                    n_left += 1
-    down = np.empty((n_down, 2), dtype=np.int64)
-    left = np.empty((n_left, 2), dtype=np.int64)
-    n_down = 0
-    n_left = 0
-    for i in range(rows):
-        for j in range(cols):
-            if mask[i, j]:
-                if i == 0 or not mask[i - 1, j]:
-                    down[n_down, 0] = i
-                    down[n_down, 1] = j
-                    n_down += 1
-                if j == 0 or not mask[i, j - 1]:
-                    left[n_left, 0] = i
-                    left[n_left, 1] = j
-                    n_left += 1
+    down = _leading_edge(mask, rows, cols, -1, 0)
+    left = _leading_edge(mask, rows, cols, 0, -1)
     steps = 0
     moved = True
     while moved and steps < max_steps:
         moved = False
-        while row > 0:
-            blocked = False
-            for t in range(n_down):
-                if forbid[row - 1 + down[t, 0], col + down[t, 1]]:
-                    blocked = True
-                    break
-            if blocked:
-                break
+        while row > 0 and _clear(forbid, down, row - 1, col):
             row -= 1
             steps += 1
             moved = True
-        while col > 0:
-            blocked = False
-            for t in range(n_left):
-                if forbid[row + left[t, 0], col - 1 + left[t, 1]]:
-                    blocked = True
-                    break
-            if blocked:
-                break
+        while col > 0 and _clear(forbid, left, row, col - 1):
             col -= 1
             steps += 1
             moved = True
@@ -539,8 +533,28 @@ def holes(prefix, max_free, free_bits, runs, cr, cc, count):  # pragma: no cover
 
 @njit(cache=True, nogil=True)
 def trial(
-    Q, q_ptr, ext, elems, el_ptr, fill, entry_ptr, order, s, width, height, pad, turns, rule,
-    block, margin, eps, per_orientation, n_starts, n_candidates, samples, slide_steps,
+    Q,
+    q_ptr,
+    ext,
+    elems,
+    el_ptr,
+    fill,
+    entry_ptr,
+    order,
+    s,
+    width,
+    height,
+    pad,
+    turns,
+    rule,
+    block,
+    margin,
+    eps,
+    per_orientation,
+    n_starts,
+    n_candidates,
+    samples,
+    slide_steps,
     min_turning_side,
 ):  # pragma: no cover - compiled
     """Place every chart, in `order`, at scale s by one placement rule.
@@ -642,8 +656,14 @@ def trial(
                     key = rr[g] + cy[o]
                     pos = n_s
                     while pos > 0 and _before(
-                        key, cc[g], o, rr[g],
-                        s_key[pos - 1], s_col[pos - 1], s_or[pos - 1], s_row[pos - 1],
+                        key,
+                        cc[g],
+                        o,
+                        rr[g],
+                        s_key[pos - 1],
+                        s_col[pos - 1],
+                        s_or[pos - 1],
+                        s_row[pos - 1],
                     ):
                         pos -= 1
                     if pos >= n_starts:
@@ -702,9 +722,19 @@ def trial(
             return t, result, need
         r, c = shape[best_o, 0], shape[best_o, 1]
         place(
-            forbid, sky, coarse, prefix, max_free, free_bits, block, masks[slot[best_o]], r, c,
+            forbid,
+            sky,
+            coarse,
+            prefix,
+            max_free,
+            free_bits,
+            block,
+            masks[slot[best_o]],
+            r,
+            c,
             best_row,
-            best_col, pad,
+            best_col,
+            pad,
         )
         _sky_minima(sky, sky_min, best_col - pad, best_col + c + pad)
         result[i, 0] = ident[best_o, 0]
@@ -715,24 +745,3 @@ def trial(
         result[i, 5] = c
         need = max(need, best_row + r + pad)
     return len(order), result, need
-
-
-def warm_up() -> None:
-    """Load (or, after installing, compile) the compiled trial for both rules on a tiny canvas.
-
-    The first call of a numba function in a process reads its machine code from the cache and
-    links it, ~0.3 s; `segparam.pipeline.build_atlas` does it in a thread while the earlier stages
-    run.
-    """
-    Q = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
-    ptr = np.array([0, 3], dtype=np.int64)
-    ext = np.array([[1.0, 1.0]])
-    elems = np.array([[0, 1, 1], [1, 2, 2], [2, 0, 0]], dtype=np.int64)
-    el_ptr = np.array([0, 3], dtype=np.int64)
-    fill = np.array([True])
-    order = np.zeros(1, dtype=np.int64)
-    for rule in (REST, HOLES):
-        trial(
-            Q, ptr, ext, elems, el_ptr, fill, ptr[:2] * 0 + np.array([0, 1]), order, 4.0, 16, 24, 1,
-            4, rule, 1, 1e-3, 1e-4, 2, 8, 4, 16, 64, 24,
-        )  # fmt: skip
