@@ -12,7 +12,6 @@ import dataclasses
 import logging
 import os
 import sys
-import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -403,11 +402,6 @@ def build_atlas(
             f"mesh has {n_faces} faces; the limit is {MAX_FACES} (about 3 KB of memory per face)"
         )
     timings: dict[str, float] = {}
-    # the packer's compiled code loads (~0.3 s) in a thread while the other stages run
-    warm = threading.Thread(target=_warm_packer, daemon=True)
-    if cfg.pack.method == "raster":
-        warm.start()
-
     with _timed(timings, "clean"):
         cleaned = clean(V, F)
     report("clean", 1, 1)
@@ -436,8 +430,6 @@ def build_atlas(
             progress=lambda done: report("parameterize", done, seg.n_charts),
         )
 
-    if warm.is_alive():
-        warm.join()
     return pack_atlas(
         Vm,
         Fm,
@@ -457,17 +449,6 @@ def _timed(timings: dict[str, float], stage: str) -> Iterator[None]:
     start = time.perf_counter()
     yield
     timings[stage] = time.perf_counter() - start
-
-
-def _warm_packer() -> None:
-    """Load the packer's compiled kernels; a failure here shows again, with its message, when the
-    pack stage runs."""
-    try:
-        from .canvas import warm_up
-
-        warm_up()
-    except Exception:  # noqa: BLE001 - the pack stage reports it
-        log.debug("warming up the packer failed", exc_info=True)
 
 
 def pack_atlas(
