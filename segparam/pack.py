@@ -286,19 +286,31 @@ def _min_area_angle(uv: np.ndarray) -> tuple[float, float]:
     H = centred[hull.vertices]  # counter-clockwise
     d = np.roll(H, -1, axis=0) - H
     theta = np.arctan2(d[:, 1], d[:, 0])
-    # rotating by -theta makes each hull edge horizontal; project the hull on both axes at once
+    angle, box = _boxes_along(H[None], theta[None], np.ones((1, len(theta)), dtype=bool))
+    return float(angle[0]), float(hull.volume / box[0])
+
+
+def _boxes_along(
+    P: np.ndarray, theta: np.ndarray, valid: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per point set ``P[c]`` (c, n, 2), the best of the boxes aligned with the directions
+    ``theta[c]`` (c, d) where ``valid``: the turn that makes it axis-aligned and wider than tall
+    (in ``(-pi, pi]``), and its area.
+
+    Turning by ``-theta`` makes a direction horizontal; the points are projected on both axes
+    at once. The argmin is tolerant (the first direction within 1e-12 of the least area), so
+    that symmetric shapes pick the same direction on every platform.
+    """
     c, s = np.cos(theta), np.sin(theta)
-    x = c[:, None] * H[None, :, 0] + s[:, None] * H[None, :, 1]
-    y = -s[:, None] * H[None, :, 0] + c[:, None] * H[None, :, 1]
-    w = x.max(axis=1) - x.min(axis=1)
-    h = y.max(axis=1) - y.min(axis=1)
-    area = w * h
-    # tolerant argmin so that symmetric shapes pick the same edge on every platform
-    best = int(np.flatnonzero(area <= area.min() * (1 + 1e-12))[0])
-    angle = -theta[best]
-    if h[best] > w[best]:
-        angle += np.pi / 2
-    return float(np.arctan2(np.sin(angle), np.cos(angle))), float(hull.volume / area[best])
+    x = c[..., None] * P[:, None, :, 0] + s[..., None] * P[:, None, :, 1]
+    y = -s[..., None] * P[:, None, :, 0] + c[..., None] * P[:, None, :, 1]
+    w, h = np.ptp(x, axis=2), np.ptp(y, axis=2)
+    box = np.where(valid, w * h, np.inf)
+    least = box.min(axis=1)
+    best = np.argmax(box <= least[:, None] * (1 + 1e-12), axis=1)
+    rows = np.arange(len(P))
+    angle = -theta[rows, best] + np.where(h[rows, best] > w[rows, best], np.pi / 2, 0.0)
+    return np.arctan2(np.sin(angle), np.cos(angle)), least
 
 
 # ----------------------------------------------------------------------------------------------
@@ -394,8 +406,15 @@ def _prepare(
     outlines = _outlines(G, fchart, voff, ccw, len(U))
     return [
         _Chart(
-            i, uv_list[i], Q[voff[i] : voff[i] + nv[i]], G[foff[i] : foff[i] + nf[i]] - voff[i],
-            extent[i], to_q[i], float(areas[i]), bool(fill[i] >= _BOXY), outlines[i],
+            i,
+            uv_list[i],
+            Q[voff[i] : voff[i] + nv[i]],
+            G[foff[i] : foff[i] + nf[i]] - voff[i],
+            extent[i],
+            to_q[i],
+            float(areas[i]),
+            bool(fill[i] >= _BOXY),
+            outlines[i],
         )  # fmt: skip
         for i in range(n)  # loop over charts: views into the arrays above
     ]
@@ -407,7 +426,8 @@ def _min_area_angles(U: np.ndarray, nv: np.ndarray, voff: np.ndarray):
     Charts of up to `_SMALL_HULL` points are done together, a group per point count: a directed
     pair (i, j) is a hull edge when no point lies right of it and the points on its line lie
     between i and j, which gives the hull without qhull; the boxes of the hull edges' directions
-    are measured as in `_min_area_angle`. Larger charts go through `_min_area_angle` one by one.
+    are measured by `_boxes_along`, as in `_min_area_angle`. Larger charts go through
+    `_min_area_angle` one by one.
     """
     n = len(nv)
     angle, fill = np.zeros(n), np.zeros(n)
@@ -433,23 +453,14 @@ def _min_area_angles(U: np.ndarray, nv: np.ndarray, voff: np.ndarray):
         area = 0.5 * np.where(hull, P[:, ii, 0] * P[:, jj, 1] - P[:, ii, 1] * P[:, jj, 0], 0)
         area = area.sum(axis=1)
         theta = np.arctan2(d[..., 1], d[..., 0])
-        cs, sn = np.cos(theta), np.sin(theta)
-        x = cs[..., None] * P[:, None, :, 0] + sn[..., None] * P[:, None, :, 1]
-        y = -sn[..., None] * P[:, None, :, 0] + cs[..., None] * P[:, None, :, 1]
-        w, h = np.ptp(x, axis=2), np.ptp(y, axis=2)
-        box = np.where(hull, w * h, np.inf)
-        best_area = box.min(axis=1)
+        a, best_area = _boxes_along(P, theta, hull)
         if not np.all(area > 0) or not np.all(np.isfinite(best_area)):
             bad = idx[~(area > 0) | ~np.isfinite(best_area)][0]
             raise InvalidMeshError(
                 f"chart {bad}: chart uv points span no area ({size} points are collinear or "
                 "coincide)"
             )
-        # tolerant argmin, as in `_min_area_angle`: the first pair within 1e-12 of the minimum
-        best = np.argmax(box <= best_area[:, None] * (1 + 1e-12), axis=1)
-        rows = np.arange(len(idx))
-        a = -theta[rows, best] + np.where(h[rows, best] > w[rows, best], np.pi / 2, 0.0)
-        angle[idx] = np.arctan2(np.sin(a), np.cos(a))
+        angle[idx] = a
         fill[idx] = area / best_area
     return angle, fill
 
@@ -750,6 +761,7 @@ def pack_charts(
     n_trials = 0
     with ThreadPoolExecutor(max_workers=min(len(rules), os.cpu_count() or 1)) as pool:
         for n_trials in range(1, _MAX_SHRINK + 1):  # noqa: B007
+
             def at_scale(rule: str, s: float = s):
                 return trial(charts, order, s, G, p, turns, rule, oriented)
 
