@@ -577,18 +577,14 @@ def hessian_eigenmap(
     return U, values
 
 
-def isometric_fit(
-    V: np.ndarray, F: np.ndarray, Y: np.ndarray, inv_frames: np.ndarray | None = None
-) -> np.ndarray:
-    """The linear map ``uv = Y A`` that makes the chart closest to isometric.
+def _metric_design(
+    V: np.ndarray, F: np.ndarray, Y: np.ndarray, inv_frames: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The least-squares design of :func:`isometric_fit`, per triangle, and its weights.
 
-    With ``G_t`` the Jacobian of triangle ``t`` into ``Y``, the map's metric is
-    ``G_t^T M G_t`` with ``M = A A^T``; ``M`` minimizes ``sum_t A_t ||G_t^T M G_t - I||_F^2``, a
-    linear least-squares problem in its three entries; ``A = M^{1/2}``.
-
-    Returns
-    -------
-    uv : (n, 2) float64 ndarray
+    ``design[t] @ (m11, m12, m22)`` is ``G_t^T M G_t`` as its entries ``(xx, yy, sqrt2 xy)``
+    (``G_t`` the Jacobian of triangle t into ``Y``); the weights are the triangle areas. Returns
+    ``design`` (m, 3, 3) and ``w`` (m,).
     """
     G = jacobians(V, F, Y, inv_frames)
     r1, r2 = G[:, 0, :], G[:, 1, :]  # rows of G_t
@@ -604,8 +600,24 @@ def isometric_fit(
         )
 
     design = np.stack([sym(r1, r1), 2 * sym(r1, r2), sym(r2, r2)], axis=2)  # (m, 3, 3)
+    return design, face_areas(V, F)
+
+
+def isometric_fit(
+    V: np.ndarray, F: np.ndarray, Y: np.ndarray, inv_frames: np.ndarray | None = None
+) -> np.ndarray:
+    """The linear map ``uv = Y A`` that makes the chart closest to isometric.
+
+    With ``G_t`` the Jacobian of triangle ``t`` into ``Y``, the map's metric is
+    ``G_t^T M G_t`` with ``M = A A^T``; ``M`` minimizes ``sum_t A_t ||G_t^T M G_t - I||_F^2``, a
+    linear least-squares problem in its three entries; ``A = M^{1/2}``.
+
+    Returns
+    -------
+    uv : (n, 2) float64 ndarray
+    """
+    design, w = _metric_design(V, F, Y, inv_frames)
     target = np.array([1.0, 1.0, 0.0])
-    w = face_areas(V, F)
     lhs = np.einsum("m,mij,mik->jk", w, design, design)
     rhs = np.einsum("m,mij,i->j", w, design, target)
     m11, m12, m22 = np.linalg.solve(lhs, rhs)
@@ -1151,21 +1163,7 @@ def _isometric_fit_charts(
 ) -> np.ndarray:
     """:func:`isometric_fit` of every chart: one 3 x 3 least-squares problem per chart."""
     face_chart = vert_chart[F[:, 0]]
-    G = jacobians(V, F, Y, inv_frames)
-    r1, r2 = G[:, 0, :], G[:, 1, :]
-
-    def sym(p, q):
-        return np.stack(
-            [
-                p[:, 0] * q[:, 0],
-                p[:, 1] * q[:, 1],
-                np.sqrt(0.5) * (p[:, 0] * q[:, 1] + p[:, 1] * q[:, 0]),
-            ],
-            axis=1,
-        )
-
-    design = np.stack([sym(r1, r1), 2 * sym(r1, r2), sym(r2, r2)], axis=2)  # (m, 3, 3)
-    w = face_areas(V, F)
+    design, w = _metric_design(V, F, Y, inv_frames)
     lhs = _chart_sum(face_chart, np.einsum("m,mij,mik->mjk", w, design, design), n_charts)
     rhs = _chart_sum(face_chart, np.einsum("m,mij,i->mj", w, design, [1.0, 1.0, 0.0]), n_charts)
     m11, m12, m22 = np.linalg.solve(lhs, rhs[:, :, None])[:, :, 0].T
