@@ -1233,7 +1233,7 @@ def render_uv_layout(
     from PIL import Image, ImageDraw
 
     from .mesh import boundary_loops
-    from .pack import rasterize_footprint
+    from .raster import rasterize_footprint
 
     labels = np.zeros(len(F), dtype=np.int64) if labels is None else np.asarray(labels)
     n = int(labels.max()) + 1
