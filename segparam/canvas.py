@@ -248,9 +248,17 @@ def fits(forbid, height, width, mask, rows, cols, row, col):  # pragma: no cover
 @njit(cache=True, nogil=True)
 def _leading_edge(mask, rows, cols, di, dj):  # pragma: no cover - compiled
     """Cells (i, j) of the footprint whose neighbour (i + di, j + dj) is not in it: the texels
-    that a one-texel move by (di, dj) newly covers."""
+    that a one-texel move by (di, dj) newly covers. (Counted first: a rows * cols buffer would
+    be megabytes per call for a large chart.)"""
     n = 0
-    edge = np.empty((rows * cols, 2), dtype=np.int64)
+    for i in range(rows):
+        for j in range(cols):
+            if mask[i, j]:
+                ni, nj = i + di, j + dj
+                if ni < 0 or nj < 0 or ni >= rows or nj >= cols or not mask[ni, nj]:
+                    n += 1
+    edge = np.empty((n, 2), dtype=np.int64)
+    n = 0
     for i in range(rows):
         for j in range(cols):
             if mask[i, j]:
@@ -259,7 +267,7 @@ def _leading_edge(mask, rows, cols, di, dj):  # pragma: no cover - compiled
                     edge[n, 0] = i
                     edge[n, 1] = j
                     n += 1
-    return edge[:n]
+    return edge
 
 
 @njit(cache=True, nogil=True)
@@ -279,6 +287,12 @@ def slide(forbid, mask, rows, cols, row, col, max_steps):  # pragma: no cover - 
     """
     down = _leading_edge(mask, rows, cols, -1, 0)
     left = _leading_edge(mask, rows, cols, 0, -1)
+    return _slide_edges(forbid, down, left, row, col, max_steps)
+
+
+@njit(cache=True, nogil=True)
+def _slide_edges(forbid, down, left, row, col, max_steps):  # pragma: no cover - compiled
+    """`slide` with the footprint's lower and left edges given (computed once per orientation)."""
     steps = 0
     moved = True
     while moved and steps < max_steps:
@@ -542,8 +556,7 @@ def trial(
     entry_ptr,
     order,
     s,
-    width,
-    height,
+    empty,
     pad,
     turns,
     rule,
@@ -566,9 +579,12 @@ def trial(
     triangles. A footprint box is ``floor(extent * s + 2 margin) + 1`` texels, the chart
     centred in it. Returns (placed, result, need): how many charts were placed in order; per
     chart (angle entry, quarter turns, row, col, footprint rows, footprint cols); the texture
-    side the layout needs (top-most footprint row + 1 + pad).
+    side the layout needs (top-most footprint row + 1 + pad). `empty` is `new_canvas(width,
+    height, pad, block)`, copied here (the same for every trial of a packing).
     """
-    forbid, sky, coarse, prefix, max_free, free_bits = new_canvas(width, height, pad, block)
+    forbid, sky, coarse = empty[0].copy(), empty[1].copy(), empty[2].copy()
+    prefix, max_free, free_bits = empty[3].copy(), empty[4].copy(), empty[5].copy()
+    height, width = forbid.shape
     sky_min = np.empty((width + _SKY_BLOCK - 1) // _SKY_BLOCK, dtype=np.int64)
     _sky_minima(sky, sky_min, 0, width)
     result = np.full((len(entry_ptr) - 1, 6), -1, dtype=np.int64)
@@ -638,6 +654,11 @@ def trial(
         n_slots = min(n_kept, n_starts) if rule == REST else n_kept
         masks = np.empty((n_slots, side, side), dtype=np.bool_)  # `turned` writes [:r, :c]
         slot = np.full(n_kept, -1, dtype=np.int64)
+        # per slot, the lower and left edges that `_slide_edges` tests (filled on first use)
+        no_edge = np.empty((0, 2), dtype=np.int64)
+        downs = [no_edge for _ in range(n_slots)]
+        lefts = [no_edge for _ in range(n_slots)]
+        has_edges = np.zeros(n_slots, dtype=np.bool_)
         used = 0
         # starting points (orientation, row, col), in the order they are tried
         if rule == REST:
@@ -710,11 +731,16 @@ def trial(
                 turned(base, r0, c0, ident[o, 1], masks[used])
                 slot[o] = used
                 used += 1
-            mask = masks[slot[o]]
+            q = slot[o]
             r, c = shape[o, 0], shape[o, 1]
-            if not fits(forbid, height, width, mask, r, c, row, col):
+            # a resting position clears the skyline in every column, so it always fits
+            if rule != REST and not fits(forbid, height, width, masks[q], r, c, row, col):
                 continue
-            row, col = slide(forbid, mask, r, c, row, col, slide_steps)
+            if not has_edges[q]:
+                downs[q] = _leading_edge(masks[q], r, c, -1, 0)
+                lefts[q] = _leading_edge(masks[q], r, c, 0, -1)
+                has_edges[q] = True
+            row, col = _slide_edges(forbid, downs[q], lefts[q], row, col, slide_steps)
             key = row + cy[o]
             if best_o < 0 or _before(key, col, o, 0, best_key, best_col, best_o, 0):
                 best_o, best_key, best_col, best_row = o, key, col, row
