@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
+from numba import njit
 from scipy.sparse.csgraph import connected_components as graph_components
 from scipy.spatial import cKDTree
 
@@ -218,44 +219,76 @@ def neighbourhoods(
     n = len(V)
     A = vertex_adjacency(F, n) if adjacency is None else adjacency
     deg = np.diff(A.indptr)
-    rows = [np.arange(n), np.repeat(np.arange(n), deg)]
-    cols = [np.arange(n), A.indices.astype(np.int64)]
-    rank = [np.zeros(n), np.ones(len(A.indices))]
-
     need = np.maximum(min_points - 1 - deg, 0)
     if extra is not None:
         need = need + extra
-    R = np.flatnonzero(need > 0)
-    if len(R):
-        have = np.concatenate([R * n + R, np.repeat(R, deg[R]) * n + A[R].tocoo().col])
-        missing = need[R].copy()
-        reach = A[R]
-        ring = 2
-        while (missing > 0).any():
-            reach = (reach @ A).tocoo()
-            keys = R[reach.row] * n + reach.col
-            new = ~np.isin(keys, have)
-            r, c = reach.row[new], reach.col[new]
-            dist = np.linalg.norm(V[c] - V[R[r]], axis=1)
-            order = np.lexsort((c, dist, r))
-            r, c = r[order], c[order]
-            first = np.searchsorted(r, r)  # position of each row's first candidate
-            take = (np.arange(len(r)) - first) < missing[r]
-            r, c = r[take], c[take]
-            rows.append(R[r])
-            cols.append(c)
-            rank.append(np.full(len(r), ring, dtype=float))
-            have = np.concatenate([have, R[r] * n + c])
-            missing -= np.bincount(r, minlength=len(R))
-            reach = reach.tocsr()
-            ring += 1
-            if ring > n:  # pragma: no cover - a connected chart with >= min_points vertices
-                raise InvalidMeshError(f"cannot find {min_points} points around every vertex")
-    rows_a, cols_a, rank_a = np.concatenate(rows), np.concatenate(cols), np.concatenate(rank)
-    order = np.lexsort((rank_a, rows_a))
     ptr = np.zeros(n + 1, dtype=np.int64)
-    ptr[1:] = np.cumsum(np.bincount(rows_a, minlength=n))
-    return ptr, cols_a[order]
+    np.cumsum(1 + deg + need, out=ptr[1:])
+    idx, short = _rings(
+        A.indptr.astype(np.int64), A.indices.astype(np.int64), np.asarray(V, dtype=np.float64),
+        need.astype(np.int64), ptr,
+    )  # fmt: skip
+    if short >= 0:
+        raise InvalidMeshError(f"cannot find {min_points} points around every vertex")
+    return ptr, idx
+
+
+@njit(cache=True, nogil=True)
+def _rings(indptr, indices, V, need, ptr):  # pragma: no cover - compiled
+    """Fill ``N_i`` (see :func:`neighbourhoods`) for every vertex: i, its 1-ring in adjacency
+    order, then ``need[i]`` more points ring by ring (breadth-first), each ring's points taken
+    nearest first (ties: lower index). Returns (idx, the first vertex whose component ran out
+    of points, or -1)."""
+    n = len(indptr) - 1
+    idx = np.empty(ptr[n], dtype=np.int64)
+    mark = np.full(n, -1, dtype=np.int64)  # mark[v] == i: v is already in N_i or its frontier
+    ring = np.empty(n, dtype=np.int64)
+    nxt = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        p = ptr[i]
+        idx[p] = i
+        p += 1
+        for t in range(indptr[i], indptr[i + 1]):
+            idx[p] = indices[t]
+            p += 1
+        missing = need[i]
+        if missing == 0:
+            continue
+        mark[i] = i
+        n_ring = 0
+        for t in range(indptr[i], indptr[i + 1]):
+            mark[indices[t]] = i
+            ring[n_ring] = indices[t]
+            n_ring += 1
+        while missing > 0:
+            n_next = 0
+            for a in range(n_ring):
+                u = ring[a]
+                for t in range(indptr[u], indptr[u + 1]):
+                    w = indices[t]
+                    if mark[w] != i:
+                        mark[w] = i
+                        nxt[n_next] = w
+                        n_next += 1
+            if n_next == 0:
+                return idx, i
+            cand = np.sort(nxt[:n_next])  # ascending index: the stable sort breaks ties by it
+            dist = np.empty(n_next)
+            for a in range(n_next):
+                d0 = V[cand[a], 0] - V[i, 0]
+                d1 = V[cand[a], 1] - V[i, 1]
+                d2 = V[cand[a], 2] - V[i, 2]
+                dist[a] = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            by = np.argsort(dist, kind="mergesort")
+            take = min(missing, n_next)
+            for a in range(take):
+                idx[p] = cand[by[a]]
+                p += 1
+            missing -= take
+            for a in range(n_next):
+                ring[a] = nxt[a]
+            n_ring = n_next
+    return idx, -1
 
 
 def _groups(ptr: np.ndarray, idx: np.ndarray, subset: np.ndarray | None = None):
