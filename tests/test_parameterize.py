@@ -12,7 +12,7 @@ from meshes import (
 )
 
 from segparam.errors import InvalidMeshError
-from segparam.mesh import edges, face_areas
+from segparam.mesh import edges, face_areas, vertex_adjacency
 from segparam.parameterize import (
     HessianSolver,
     _design,
@@ -167,6 +167,38 @@ def test_neighbourhoods_are_one_rings_with_minimal_extension():
     for i in range(len(V)):
         N = idx[ptr[i] : ptr[i + 1]]
         assert len(set(N.tolist())) == len(N)
+
+
+def test_neighbourhood_extension_takes_the_next_rings_nearest_first():
+    # Brute force: hop distances from a shortest-path search; every extension point comes from
+    # the nearest rings (a ring is used only when the previous one is exhausted), and from the
+    # last ring it uses, the points nearest in space.
+    from scipy.sparse.csgraph import shortest_path
+
+    V, F = tri_grid(9, 7)
+    V = V + 0.05 * np.random.default_rng(3).normal(size=V.shape)
+    extra = np.random.default_rng(4).integers(0, 5, len(V))
+    ptr, idx = neighbourhoods(V, F, min_points=7, extra=extra)
+    A = vertex_adjacency(F, len(V))
+    hops = shortest_path(A, unweighted=True)
+    degree = np.diff(A.indptr)
+    for i in range(len(V)):
+        N = idx[ptr[i] : ptr[i + 1]]
+        one = 1 + degree[i]
+        assert N[0] == i and set(N[1:one].tolist()) == set(A[[i]].indices.tolist())
+        assert len(N) == max(7, one) + extra[i] and len(set(N.tolist())) == len(N)
+        ext = N[one:]
+        if len(ext) == 0:
+            continue
+        h = hops[i, ext]
+        assert (np.diff(h) >= 0).all() and h[0] >= 2
+        last = h[-1]
+        inner = np.flatnonzero((hops[i] >= 2) & (hops[i] < last))
+        assert set(inner.tolist()) <= set(ext.tolist())
+        ring = np.flatnonzero(hops[i] == last)
+        taken = ext[h == last]
+        d = np.linalg.norm(V[ring] - V[i], axis=1)
+        assert np.linalg.norm(V[taken] - V[i], axis=1).max() <= np.sort(d)[len(taken) - 1]
 
 
 @pytest.mark.parametrize("min_rcond", [0.03, 0.1, 0.16])
