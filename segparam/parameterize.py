@@ -39,7 +39,7 @@ from scipy.sparse.csgraph import connected_components as graph_components
 from scipy.spatial import cKDTree
 
 from .errors import InvalidMeshError, check_choice, check_int
-from .linalg import smallest_eigenpairs, spd_solver
+from .linalg import one_blas_thread, smallest_eigenpairs, spd_solver
 from .mesh import (
     boundary_edges,
     check_mesh,
@@ -1147,8 +1147,6 @@ def _block_eigenmaps(
     values : (c, 3) float64 ndarray
         Each block's three smallest eigenvalues.
     """
-    from threadpoolctl import threadpool_limits
-
     n_charts = len(size)
     chart = np.repeat(np.arange(n_charts), size)
     C = K.tocoo()
@@ -1159,7 +1157,7 @@ def _block_eigenmaps(
     by_size = np.argsort(entry_size, kind="stable")
     sizes, first = np.unique(entry_size[by_size], return_index=True)
     bounds = np.r_[first, len(by_size)]
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():
         for k, s in enumerate(sizes):  # one batch per block size, not per block
             e = by_size[bounds[k] : bounds[k + 1]]
             charts = np.flatnonzero(size == s)

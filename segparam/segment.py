@@ -47,10 +47,9 @@ import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components as _cc
 from scipy.sparse.csgraph import dijkstra
 from scipy.special import ive
-from threadpoolctl import threadpool_limits
 
 from .errors import check_int, check_number
-from .linalg import DENSE_LIMIT, smallest_eigenpairs, spd_solver
+from .linalg import DENSE_LIMIT, one_blas_thread, smallest_eigenpairs, spd_solver
 from .mesh import (
     boundary_edges,
     check_mesh,
@@ -913,8 +912,8 @@ def segment(
     labels[single[comp]] = comp[single[comp]] + 0  # temporary: unique per component
     # Lanczos' and CPQR's BLAS calls are thin (20k x 20) and the dense eigenproblems small:
     # threads only add overhead (on a busy 2-core machine they doubled the CPU time of the 20k
-    # brain's clustering); one limit for all components (setting it costs about 1 ms).
-    limit = threadpool_limits(limits=1, user_api="blas") if len(big) else nullcontext()
+    # brain's clustering); one limit for all components.
+    limit = one_blas_thread() if len(big) else nullcontext()
     with limit:
         labels = _cluster_components(W, comp, big, share, labels, n_comp, cfg, seed)
     labels = np.unique(labels, return_inverse=True)[1].ravel().astype(np.int64)
