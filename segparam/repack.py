@@ -255,9 +255,10 @@ def repack(
     F : (m, 3) array_like of int
     uv : (k, 2) array_like of float
         The existing uv coordinates (any range: the packer moves and scales the islands).
-    face_uv : (m, 3) array_like of int, optional
+    face_uv : (m, 3) array_like of int, or (m, 3, 2) array_like of float, optional
         Per face corner, the row of ``uv`` (OBJ ``f v/vt``); default ``F`` (one uv per vertex,
-        as glTF and trimesh store them).
+        as glTF and trimesh store them). Or the uv of every corner (then ``uv`` is None):
+        corners with equal uv are one uv vertex.
     config : RepackConfig, optional
 
     Returns
@@ -284,14 +285,17 @@ def repack(
         if uv is None:
             raise InvalidMeshError("the mesh has no uv coordinates to repack")
     V, F = check_mesh(*mesh_arrays(V, F), allow_degenerate=True)
+    if uv is not None:
+        uv = np.asarray(uv, dtype=np.float64)
+        if uv.ndim != 2 or uv.shape[1] != 2:
+            raise InvalidMeshError(f"uv must have shape (k, 2), got {uv.shape}")
+        if not np.isfinite(uv).all():
+            raise InvalidMeshError("uv has NaN or infinite coordinates")
+    welded, Fu = _face_uv(F if face_uv is None else face_uv, None if uv is None else len(uv))
+    if welded is not None:  # uv given per corner
+        uv = welded
     if uv is None:
         raise InvalidMeshError("no uv coordinates to repack (uv is None)")
-    uv = np.asarray(uv, dtype=np.float64)
-    if uv.ndim != 2 or uv.shape[1] != 2:
-        raise InvalidMeshError(f"uv must have shape (k, 2), got {uv.shape}")
-    if not np.isfinite(uv).all():
-        raise InvalidMeshError("uv has NaN or infinite coordinates")
-    _, Fu = _face_uv(F if face_uv is None else face_uv, len(uv))
     if Fu.shape != F.shape:
         raise InvalidMeshError(f"face uv has {len(Fu)} faces but the mesh has {len(F)}")
 

@@ -109,6 +109,9 @@ def test_keep_from_a_trimesh_with_uv():
     np.testing.assert_allclose(a.uv, b.uv)
     with pytest.raises(InvalidMeshError, match="no uv"):
         repack(trimesh.Trimesh(V, F, process=False))
+    # uv per face corner (equal corners welded) gives the same layout
+    c = repack(V, F, None, uv[F], config=RepackConfig(pack=PACK))
+    np.testing.assert_allclose(c.uv[c.uv_F], b.uv[b.uv_F], atol=1e-12)
 
 
 def _broken_layout():
