@@ -43,6 +43,8 @@ OVERLAP_TOL = 1e-9
 #: A uv face of at most this share of its island's uv area counts as degenerate (a flip): the
 #: threshold :data:`segparam.quality.DEGENERATE_AREA` of the charts' bijectivity check.
 DEGENERATE_SHARE = 1e-12
+#: Candidate pairs per separating-axis batch: ~300 bytes of temporaries per pair (80 MB).
+SAT_CHUNK = 262_144
 
 
 @dataclass(frozen=True)
@@ -187,9 +189,9 @@ def _overlapping_pairs(uv: np.ndarray, Fu: np.ndarray, live: np.ndarray) -> np.n
     """Pairs of faces (of the ``live`` ones) whose uv triangles' interiors overlap, ``(p, 2)``.
 
     Candidates are faces whose centroids are closer than twice the largest centroid-to-corner
-    distance (a k-d tree); each candidate pair gets the separating-axis test on the six edge
-    normals, which is exact for two triangles (two convex sets whose interiors are disjoint
-    are separated by a line along an edge of one of them).
+    distance (a k-d tree) and whose bounding boxes overlap; each candidate pair gets the
+    separating-axis test on the six edge normals, which is exact for two triangles (two convex
+    sets whose interiors are disjoint are separated by a line along an edge of one of them).
     """
     idx = np.flatnonzero(live)
     if len(idx) < 2:
@@ -197,21 +199,32 @@ def _overlapping_pairs(uv: np.ndarray, Fu: np.ndarray, live: np.ndarray) -> np.n
     T = uv[Fu[idx]]  # (f, 3, 2)
     c = T.mean(axis=1)
     radius = float(np.linalg.norm(T - c[:, None], axis=2).max())
+    tol = OVERLAP_TOL * float(np.ptp(T.reshape(-1, 2), axis=0).max())
     pairs = cKDTree(c).query_pairs(2 * radius * (1 + 1e-9), output_type="ndarray")
-    if len(pairs) == 0:
-        return np.zeros((0, 2), dtype=np.int64)
+    lo, hi = T.min(axis=1), T.max(axis=1)
+    a, b = pairs[:, 0], pairs[:, 1]
+    boxes = ((np.minimum(hi[a], hi[b]) - np.maximum(lo[a], lo[b])) > tol).all(axis=1)
+    pairs = pairs[boxes]
+    hits = [np.zeros((0, 2), dtype=np.int64)]
+    for k in range(0, len(pairs), SAT_CHUNK):  # batches of pairs, bounded memory
+        batch = pairs[k : k + SAT_CHUNK]
+        hits.append(batch[_sat_overlap(T, batch, tol)])
+    return idx[np.concatenate(hits)]
+
+
+def _sat_overlap(T: np.ndarray, pairs: np.ndarray, tol: float) -> np.ndarray:
+    """Whether triangles ``T[pairs[:, 0]]`` and ``T[pairs[:, 1]]`` overlap deeper than ``tol``
+    along each of their six edge normals (the separating-axis test)."""
     A, B = T[pairs[:, 0]], T[pairs[:, 1]]
-    edges = np.concatenate([np.roll(A, -1, axis=1) - A, np.roll(B, -1, axis=1) - B], axis=1)
-    normal = np.stack([-edges[..., 1], edges[..., 0]], axis=2)  # (p, 6, 2)
-    length = np.linalg.norm(normal, axis=2)
-    normal = normal / np.where(length > 0, length, 1.0)[..., None]
-    pa = np.einsum("pad,pkd->pak", normal, A)  # (p, 6 axes, 3 corners)
-    pb = np.einsum("pad,pkd->pak", normal, B)
+    E = np.concatenate([A[:, [1, 2, 0]] - A, B[:, [1, 2, 0]] - B], axis=1)  # (p, 6, 2) edges
+    length = np.hypot(E[..., 0], E[..., 1])
+    scale = np.where(length > 0, length, 1.0)
+    nx, ny = -E[..., 1] / scale, E[..., 0] / scale  # unit normals (p, 6)
+    pa = nx[:, :, None] * A[:, None, :, 0] + ny[:, :, None] * A[:, None, :, 1]  # (p, 6, 3)
+    pb = nx[:, :, None] * B[:, None, :, 0] + ny[:, :, None] * B[:, None, :, 1]
     depth = np.minimum(pa.max(axis=2), pb.max(axis=2)) - np.maximum(pa.min(axis=2), pb.min(axis=2))
-    depth = np.where(length > 0, depth, np.inf)  # a zero edge separates nothing
-    extent = float(np.ptp(T.reshape(-1, 2), axis=0).max())
-    overlap = depth.min(axis=1) > OVERLAP_TOL * extent
-    return idx[pairs[overlap]]
+    depth[length == 0] = np.inf  # a zero edge separates nothing
+    return depth.min(axis=1) > tol
 
 
 def _island_checks(

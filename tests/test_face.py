@@ -132,10 +132,10 @@ def test_parametrize_handles_dropped_faces_as_xatlas_does():
     ):
         _check_contract(V, F, vmapping, indices, uvs)
         assert unused not in vmapping
-    # the repeated-index and zero-area faces: corners at uv (0, 0), as xatlas puts them
-    for face in bad[:2]:
-        assert (uvs[indices[face]] == 0).all()
-        assert not np.isin(indices[face], np.delete(indices, bad, axis=0)).any()
+        # repeated-index and zero-area faces: corners of their own at uv (0, 0)
+        for face in bad[:2]:
+            assert (uvs[indices[face]] == 0).all()
+            assert not np.isin(indices[face], np.delete(indices, bad, axis=0)).any()
 
 
 def test_parametrize_takes_lists_and_trimesh_and_a_wound_face():
