@@ -101,7 +101,7 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> object:
     """Import the module that holds ``name`` on first access (PEP 562)."""
     import importlib
 

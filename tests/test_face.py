@@ -17,6 +17,7 @@ import segparam
 from segparam.errors import ConfigError, InvalidMeshError
 from segparam.pipeline import PipelineConfig, build_atlas
 from segparam.quality import signed_areas
+from tests.meshes import tri_grid
 
 HEAVY = ("numpy", "numba", "scipy", "pymeshlab", "trimesh")
 FAST = PipelineConfig().replace(pack={"resolution": 256})
@@ -149,6 +150,15 @@ def test_parametrize_takes_lists_and_trimesh_and_a_wound_face():
         np.testing.assert_array_equal(a, b)
 
 
+def test_parametrize_welds_a_triangle_soup_into_charts():
+    V, F = _sphere()
+    soup_V, soup_F = V[F].reshape(-1, 3), np.arange(3 * len(F)).reshape(-1, 3)
+    vmapping, indices, uvs = segparam.parametrize(soup_V, soup_F, config=FAST)
+    _check_contract(soup_V, soup_F, vmapping, indices, uvs)
+    # charted as a surface (cleaning merges the copies), not one island per triangle
+    assert len(np.unique(uvs, axis=0)) < len(V) * 1.5 < len(soup_V)
+
+
 def test_parametrize_refuses_remeshing_and_bad_input():
     V, F = _sphere()
     with pytest.raises(ConfigError, match="keeps the input vertices"):
@@ -173,6 +183,20 @@ def test_stage_functions_take_a_trimesh():
     np.testing.assert_array_equal(a.uv, b.uv)
     np.testing.assert_array_equal(clean(mesh).F, clean(V, F).F)
     np.testing.assert_array_equal(segment(mesh).labels, segment(V, F).labels)
+    from segparam.parameterize import parameterize_chart
+    from segparam.remesh import RemeshConfig, remesh
+    from segparam.split import parameterize_charts
+
+    off = RemeshConfig(mode="off")
+    np.testing.assert_array_equal(remesh(mesh, config=off).F, F)
+    labels = segment(V, F).labels
+    pieces = parameterize_charts(mesh, labels=labels).charts
+    assert [c.faces.tolist() for c in pieces] == [
+        c.faces.tolist() for c in parameterize_charts(V, F, labels).charts
+    ]
+    Vd, Fd = tri_grid(6, 5)
+    disk = trimesh.Trimesh(Vd, Fd, process=False)
+    np.testing.assert_array_equal(parameterize_chart(disk).uv, parameterize_chart(Vd, Fd).uv)
     with pytest.raises(InvalidMeshError, match="pass the mesh alone"):
         clean(mesh, F)
     with pytest.raises(InvalidMeshError, match="Scene"):
