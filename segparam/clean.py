@@ -22,7 +22,7 @@ from scipy.sparse.csgraph import connected_components as _cc
 from scipy.spatial import cKDTree
 
 from .errors import InvalidMeshError
-from .mesh import check_mesh, edges, face_areas
+from .mesh import check_mesh, edges, face_areas, mesh_arrays
 
 __all__ = [
     "REASON_DUPLICATE",
@@ -135,7 +135,7 @@ class CleanResult:
 
 def clean(
     V,
-    F,
+    F=None,
     *,
     merge_tolerance: float = 1e-9,
     area_tolerance: float = 1e-14,
@@ -183,6 +183,7 @@ def clean(
         :func:`segparam.mesh.check_mesh`), coordinates so large that squared distances
         overflow, a negative tolerance, or when no face is left.
     """
+    V, F = mesh_arrays(V, F)  # or a trimesh.Trimesh alone
     if not (merge_tolerance >= 0 and area_tolerance >= 0):
         raise InvalidMeshError(
             f"tolerances must be >= 0, got merge_tolerance={merge_tolerance}, "

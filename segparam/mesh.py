@@ -7,6 +7,9 @@ arrays or scipy sparse matrices.
 
 from __future__ import annotations
 
+import sys
+from typing import Any
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components as _cc
@@ -33,6 +36,7 @@ __all__ = [
     "is_edge_manifold",
     "is_vertex_manifold",
     "label_topology",
+    "mesh_arrays",
     "disk_labels",
     "vertex_adjacency",
     "vertex_normals",
@@ -107,6 +111,38 @@ def check_mesh(V, F, *, allow_degenerate: bool = False) -> tuple[np.ndarray, np.
                 f"{int(zero.sum())} of {len(F)} faces have zero area "
                 f"(first: face {int(np.flatnonzero(zero)[0])})"
             )
+    return V, F
+
+
+def mesh_arrays(V: Any, F: Any = None) -> tuple[Any, Any]:
+    """``(V, F)`` from the two arrays, or from a ``trimesh.Trimesh`` passed alone as ``V``.
+
+    The public functions that take a mesh call this first, so that each accepts either form.
+    Arrays are returned as given (each function checks them itself); a mesh gives its
+    ``vertices`` and ``faces`` as plain ndarrays. trimesh is never imported here: if it is not
+    loaded, ``V`` cannot be one of its meshes.
+
+    Raises
+    ------
+    InvalidMeshError
+        A ``Trimesh`` together with faces, a ``trimesh.Scene`` (several meshes), or arrays
+        without faces.
+    """
+    trimesh = sys.modules.get("trimesh")
+    if trimesh is not None and isinstance(V, trimesh.Trimesh):
+        if F is not None:
+            raise InvalidMeshError(
+                "got a trimesh.Trimesh and faces: pass the mesh alone, or V and F"
+            )
+        return np.asarray(V.vertices), np.asarray(V.faces)
+    if trimesh is not None and isinstance(V, trimesh.Scene):
+        raise InvalidMeshError(
+            "got a trimesh.Scene (several meshes); pass one trimesh.Trimesh, e.g. scene.to_mesh()"
+        )
+    if F is None:
+        raise InvalidMeshError(
+            f"no faces: pass V and F, or a trimesh.Trimesh alone (got {type(V).__name__} alone)"
+        )
     return V, F
 
 

@@ -47,6 +47,7 @@ from .mesh import (
     face_areas,
     is_edge_manifold,
     is_vertex_manifold,
+    mesh_arrays,
     vertex_adjacency,
     vertex_normals,
 )
@@ -774,7 +775,7 @@ class HessianSolver:
     def __init__(
         self,
         V,
-        F,
+        F=None,
         *,
         method: str = "hessian",
         tangent: str = "normals",
@@ -785,7 +786,7 @@ class HessianSolver:
         tangent = check_choice("tangent", tangent, TANGENTS)
         min_points = check_int("min_points", min_points, low=MIN_POINTS)
         n_neighbors = check_int("n_neighbors", n_neighbors, low=MIN_POINTS)
-        self.V, self.F = check_chart(V, F)
+        self.V, self.F = check_chart(*mesh_arrays(V, F))  # or a trimesh.Trimesh alone
         self.method, self.tangent = method, tangent
         # Work in units of the typical edge length, centred: the map is invariant under rigid
         # motion and uniform scaling, and K's entries (~ length^-2) stay far from over/underflow
@@ -856,7 +857,7 @@ class HessianSolver:
 
 def parameterize_chart(
     V,
-    F,
+    F=None,
     *,
     method: str = "hessian",
     tangent: str = "normals",

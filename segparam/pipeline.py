@@ -23,7 +23,7 @@ import numpy as np
 from . import __version__
 from .clean import CleanResult, clean
 from .errors import ConfigError, InvalidMeshError
-from .mesh import boundary_edges, connected_components, face_areas, unit_frame
+from .mesh import boundary_edges, connected_components, face_areas, mesh_arrays, unit_frame
 from .pack import MAX_RESOLUTION, PackConfig, PackResult, pack_charts
 from .quality import distortion, signed_areas
 from .remesh import RemeshConfig, RemeshResult, remesh
@@ -260,6 +260,13 @@ class Atlas:
 
         return save_atlas(self, outdir, stem=stem, **kwargs)
 
+    def to_trimesh(self, image: Any = None) -> Any:
+        """A ``trimesh.Trimesh`` split along the seams with ``TextureVisuals`` (uv and the
+        checker texture, or ``image``); see :func:`segparam.interop.atlas_to_trimesh`."""
+        from .interop import atlas_to_trimesh
+
+        return atlas_to_trimesh(self, image)
+
 
 def _versions() -> dict[str, str]:
     import importlib.metadata as md
@@ -360,7 +367,7 @@ def build_report(atlas: Atlas) -> dict[str, Any]:
 
 def build_atlas(
     V,
-    F,
+    F=None,
     config: PipelineConfig | None = None,
     *,
     seed: int = 0,
@@ -370,7 +377,7 @@ def build_atlas(
 
     Parameters
     ----------
-    V : (n, 3) array_like of float
+    V : (n, 3) array_like of float, or a trimesh.Trimesh (then no F)
     F : (m, 3) array_like of int
         Any triangle mesh (it is cleaned first; defects are repaired or reported).
     config : PipelineConfig, optional
@@ -393,6 +400,7 @@ def build_atlas(
         (:func:`chart_room`): checked as soon as the count is known (connected pieces after
         cleaning, charts after segmentation), not after packing.
     """
+    V, F = mesh_arrays(V, F)
     cfg = config or PipelineConfig()
     seed = check_seed(seed)
     report = progress or (lambda stage, done, total: None)

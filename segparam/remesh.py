@@ -53,6 +53,7 @@ from .mesh import (
     face_normals,
     is_edge_manifold,
     is_vertex_manifold,
+    mesh_arrays,
 )
 
 log = logging.getLogger(__name__)
@@ -534,7 +535,7 @@ def _validate(
     return V, F, ""
 
 
-def remesh(V, F, *, config: RemeshConfig | None = None) -> RemeshResult:
+def remesh(V, F=None, *, config: RemeshConfig | None = None) -> RemeshResult:
     """Isotropic remeshing of a surface when (by ``config.mode``) it helps the chart solver.
 
     The result keeps the input's boundary loops (boundary vertices stay on the input boundary
@@ -566,7 +567,7 @@ def remesh(V, F, *, config: RemeshConfig | None = None) -> RemeshResult:
     config = RemeshConfig() if config is None else config
     if not isinstance(config, RemeshConfig):
         raise ConfigError(f"config must be a RemeshConfig, got {type(config).__name__}")
-    V_in, F_in = V, F
+    V_in, F_in = V, F = mesh_arrays(V, F)  # or a trimesh.Trimesh alone
     V, F = check_mesh(V, F, allow_degenerate=True)
     before = _quality(V, F)
 

@@ -59,6 +59,7 @@ from .mesh import (
     face_areas,
     face_normals,
     is_disk,
+    mesh_arrays,
     unit_frame,
     vertex_adjacency,
 )
@@ -847,7 +848,7 @@ def _cluster_components(
 
 def segment(
     V: np.ndarray,
-    F: np.ndarray,
+    F: np.ndarray | None = None,
     *,
     config: SegmentConfig | None = None,
     seed: int = 0,
@@ -868,7 +869,7 @@ def segment(
     Segmentation
     """
     cfg = config or SegmentConfig()
-    V, F = check_mesh(V, F)
+    V, F = check_mesh(*mesh_arrays(V, F))  # or a trimesh.Trimesh alone
     center, size = unit_frame(V)
     V = (V - center) / size  # scale-free from here on
     m = len(F)

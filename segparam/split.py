@@ -43,6 +43,7 @@ from .mesh import (
     face_normals,
     is_disk,
     label_topology,
+    mesh_arrays,
     unit_frame,
     vertex_adjacency,
 )
@@ -236,8 +237,8 @@ def _stop(pool) -> None:
 
 def parameterize_charts(
     V: np.ndarray,
-    F: np.ndarray,
-    labels: np.ndarray,
+    F: np.ndarray | None = None,
+    labels: np.ndarray | None = None,
     *,
     config: SplitConfig | None = None,
     seed: int = 0,
@@ -264,8 +265,8 @@ def parameterize_charts(
     ChartSet
     """
     cfg = config or SplitConfig()
-    V, F = check_mesh(V, F)
-    labels = np.asarray(labels)
+    V, F = check_mesh(*mesh_arrays(V, F))  # or a trimesh.Trimesh alone (labels by keyword)
+    labels = np.asarray(-1 if labels is None else labels)
     if labels.shape != (len(F),) or labels.dtype.kind not in "iu" or labels.min() < 0:
         raise InvalidMeshError(
             f"labels must be {len(F)} non-negative integers (one chart per face), "
