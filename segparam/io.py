@@ -24,6 +24,7 @@ import struct
 import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -43,6 +44,7 @@ __all__ = [
     "check_output_folder",
     "checker_image",
     "fit_name",
+    "json_safe",
     "load_mesh",
     "mesh_stem",
     "name_max",
@@ -912,6 +914,21 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         os.replace(tmp_path, path)  # one rename: the old file or the new one, never neither
     finally:
         tmp_path.unlink(missing_ok=True)
+
+
+def json_safe(value: Any) -> Any:
+    """``value`` with what JSON cannot hold replaced: inf and nan become None, numpy scalars
+    Python ones (dicts, lists and tuples are walked; tuples become lists). Used for the atlas
+    report and the batch summaries."""
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
 
 
 # ---------------------------------------------------------------------------------------------

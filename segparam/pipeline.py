@@ -273,19 +273,6 @@ def _versions() -> dict[str, str]:
     return out
 
 
-def _clean_json(value: Any) -> Any:
-    """Floats that JSON cannot hold (inf, nan) become None; numpy scalars become Python ones."""
-    if isinstance(value, dict):
-        return {k: _clean_json(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean_json(v) for v in value]
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
-    return value
-
-
 def build_report(atlas: Atlas) -> dict[str, Any]:
     """Per-chart and global figures of an atlas (see the README's "Outputs")."""
     # Figures are computed in the unit frame (scale-free ones as they are, areas and lengths
@@ -355,7 +342,9 @@ def build_report(atlas: Atlas) -> dict[str, Any]:
         },
         "charts": charts,
     }
-    return _clean_json(report)
+    from .io import json_safe
+
+    return json_safe(report)
 
 
 def build_atlas(
