@@ -294,7 +294,7 @@ def no_stage(monkeypatch):
         (segparam.segment, "segment"),
         (segparam.split, "parameterize_charts"),
         (segparam.artifacts, "load_stage"),
-        (segparam.batch, "_import_dask"),
+        (segparam.batch, "require_dask"),
         (segparam.batch, "run_batch"),
     ]:
         monkeypatch.setattr(module, name, work)
