@@ -118,15 +118,14 @@ DEFAULT_CHART_NAME = "brain_parcel.obj"
 
 
 def _cmd_chart(args: argparse.Namespace) -> int:
+    from .export import render_uv_layout, write_obj
     from .io import (
         check_output_files,
         fit_name,
         load_mesh,
         mesh_stem,
         name_max,
-        render_uv_layout,
         staged_outputs,
-        write_obj,
     )
     from .parameterize import parameterize_chart
 

@@ -254,9 +254,9 @@ class Atlas:
         written are returned. A folder that cannot take the files (read-only, a file in the
         way, disk full...) raises :class:`~segparam.errors.MeshFileError` (a
         :class:`~segparam.errors.SegparamError` and an ``OSError``) with one line, and leaves no
-        file (see :func:`segparam.io.save_atlas`).
+        file (see :func:`segparam.export.save_atlas`).
         """
-        from .io import save_atlas
+        from .export import save_atlas
 
         return save_atlas(self, outdir, stem=stem, **kwargs)
 

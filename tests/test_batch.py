@@ -19,7 +19,7 @@ from segparam.batch import (
 )
 from segparam.cli import main
 from segparam.errors import MeshFileError, SegparamError
-from segparam.io import write_obj
+from segparam.export import write_obj
 from segparam.pipeline import PipelineConfig
 
 FAST = ["--resolution", "256", "--quiet"]

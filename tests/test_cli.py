@@ -7,7 +7,8 @@ import pytest
 from meshes import tri_grid
 
 from segparam.cli import main
-from segparam.io import load_mesh, write_obj
+from segparam.export import write_obj
+from segparam.io import load_mesh
 
 
 @pytest.fixture

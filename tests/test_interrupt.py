@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from segparam.io import write_obj
+from segparam.export import write_obj
 from segparam.split import PARALLEL_MIN_FACES
 from segparam.synthetic import brain_like_surface
 

@@ -23,6 +23,7 @@ from meshes import tri_grid
 
 import segparam.artifacts
 import segparam.batch
+import segparam.export
 import segparam.io
 import segparam.pipeline
 from segparam import cli
@@ -30,7 +31,8 @@ from segparam.artifacts import stage_paths
 from segparam.batch import assign_folders, process_one
 from segparam.cli import main
 from segparam.errors import ConfigError, MeshFileError, SegparamError, SolverError
-from segparam.io import ATLAS_SUFFIXES, fit_name, load_mesh, write_obj
+from segparam.export import write_obj
+from segparam.io import ATLAS_SUFFIXES, fit_name, load_mesh
 from segparam.pipeline import MAX_RESOLUTION, MAX_SEED, PipelineConfig, build_atlas, chart_room
 
 FAST = ["--resolution", "128", "--no-remesh", "--quiet"]
@@ -90,7 +92,7 @@ def no_work(monkeypatch):
         (segparam.pipeline, "build_atlas"),
         (segparam.pipeline, "pack_atlas"),
         (segparam.pipeline, "clean"),
-        (segparam.batch, "_import_dask"),
+        (segparam.batch, "require_dask"),
     ]:
         monkeypatch.setattr(module, name, work)
 
@@ -382,7 +384,7 @@ def test_atlas_save_raises_segparam_errors(small_atlas, tmp_path, monkeypatch):
     def disk_full(*args, **kwargs):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(segparam.io, "render_uv_layout", disk_full)
+    monkeypatch.setattr(segparam.export, "render_uv_layout", disk_full)
     out = tmp_path / "out"
     with pytest.raises(MeshFileError, match="No space left on device"):
         small_atlas.save(out, stem="grid")

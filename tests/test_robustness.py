@@ -25,7 +25,8 @@ import segparam.pipeline
 from segparam.clean import clean
 from segparam.cli import main
 from segparam.errors import InvalidMeshError, MeshFileError, SegparamError
-from segparam.io import load_mesh, write_obj
+from segparam.export import write_obj
+from segparam.io import load_mesh
 from segparam.pipeline import PipelineConfig, build_atlas
 from segparam.quality import signed_areas
 from segparam.segment import segment
