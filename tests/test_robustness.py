@@ -20,6 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from meshes import plate_with_holes, rigid, tri_grid
 
+import segparam.export
 import segparam.io
 import segparam.pipeline
 from segparam.clean import clean
@@ -568,7 +569,7 @@ def test_ctrl_c_exits_130_and_leaves_no_file(where, tmp_path, capsys, monkeypatc
     if where == "pack":
         monkeypatch.setattr(segparam.pipeline, "pack_charts", _interrupt)
     elif where == "render":
-        monkeypatch.setattr(segparam.io, "render_uv_layout", _interrupt)
+        monkeypatch.setattr(segparam.export, "render_uv_layout", _interrupt)
     else:
         _interrupt_between_moves(monkeypatch, out)
     code, lines = run_atlas(path, out, capsys)
