@@ -84,21 +84,14 @@ def require_dask() -> Any:
 # Inputs
 
 
-def _mesh_stem(path: Path) -> str:
-    """The file name without its mesh suffix (``lh.pial.gii.gz`` -> ``lh.pial``)."""
-    from .io import mesh_stem
-
-    return mesh_stem(path)
-
-
 def _is_mesh_file(path: Path) -> bool:
-    from .io import SUPPORTED_SUFFIXES
+    """A visible file with a suffix :func:`segparam.io.load_mesh` reads (any case)."""
+    from .io import SUPPORTED_SUFFIXES, split_suffix
 
-    name = path.name.lower()
     return (
-        not name.startswith(".")
+        not path.name.startswith(".")
         and path.is_file()
-        and any(name.endswith(suffix) for suffix in SUPPORTED_SUFFIXES)
+        and split_suffix(path)[1] in SUPPORTED_SUFFIXES
     )
 
 
@@ -174,13 +167,13 @@ def assign_folders(paths: Iterable[Path], *, limit: int | None = None) -> list[s
     (default: 255, the usual file-system limit) keeps the beginning of its stem and gets a hash
     of the whole stem (:func:`segparam.io.fit_name`).
     """
-    from .io import DEFAULT_NAME_MAX, fit_name
+    from .io import DEFAULT_NAME_MAX, fit_name, mesh_stem
 
     limit = DEFAULT_NAME_MAX if limit is None else limit
     used: set[str] = set()
     names = []
     for path in paths:
-        stem = _mesh_stem(Path(path)) or "mesh"
+        stem = mesh_stem(path)
         name, k = fit_name(stem, limit=limit), 1
         while name.casefold() in used:
             k += 1
@@ -271,7 +264,14 @@ def process_one(
         One summary row (:data:`SUMMARY_FIELDS`): status ``done``, ``skipped`` or ``failed``
         (with the one-line reason: the :class:`SegparamError` message, else ``Type: message``).
     """
-    from .io import atlas_file_names, atlas_stem, atomic_path, check_output_folder, load_mesh
+    from .io import (
+        atlas_file_names,
+        atlas_stem,
+        atomic_path,
+        check_output_folder,
+        load_mesh,
+        mesh_stem,
+    )
     from .pipeline import build_atlas, config_from_dict
 
     path, folder = Path(path), Path(outdir)
@@ -280,7 +280,7 @@ def process_one(
         skipped = _done_row(path, folder, config_dict, seed)
         if skipped is not None:
             return skipped
-        stem = atlas_stem(_mesh_stem(path), folder)
+        stem = atlas_stem(mesh_stem(path), folder)
         names = [*atlas_file_names(stem).values(), DONE_MARKER]
         check_output_folder(folder, names, inputs=[path])  # before any work
         # One task per mesh already keeps every worker busy: no process pool inside a task.

@@ -533,18 +533,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     stage(
         "remesh",
-        "stage 1-2: load, clean and remesh a mesh file -> OUT.npz + OUT.json",
+        "load, clean and remesh a mesh file -> OUT.npz + OUT.json",
         "mesh file",
         "artifact (.npz)",
         _cmd_remesh,
         [("--remesh", {"choices": ["auto", "on", "off"]})],
     )
-    stage(
-        "segment", "stage 3: charts of a remesh artifact", "remesh .npz", "artifact", _cmd_segment
-    )
+    stage("segment", "charts of a remesh artifact", "remesh .npz", "artifact", _cmd_segment)
     stage(
         "parameterize",
-        "stage 4-5: map every chart bijectively (split + retry)",
+        "map every chart bijectively (split + retry)",
         "segment .npz",
         "artifact (.npz)",
         _cmd_parameterize,
@@ -552,7 +550,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     stage(
         "pack",
-        "stage 6-7: pack the charts and write the atlas files",
+        "pack the charts and write the atlas files",
         "parameterize .npz",
         "output folder",
         _cmd_pack,

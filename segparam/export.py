@@ -175,7 +175,7 @@ def render_uv_layout(
     """
     from PIL import Image, ImageDraw
 
-    from .mesh import boundary_loops
+    from .mesh import boundary_loops, group_by_label
     from .raster import rasterize_footprint
 
     labels = np.zeros(len(F), dtype=np.int64) if labels is None else np.asarray(labels)
@@ -183,8 +183,7 @@ def render_uv_layout(
     # colour of each chart's number + 1; 0 (no chart) is white
     lut = np.vstack([[255, 255, 255], _palette(n)]).astype(np.uint8)
     chart = np.zeros((size, size), dtype=np.uint8 if n < 255 else np.int64)
-    order = np.argsort(labels, kind="stable")
-    bounds = np.searchsorted(labels[order], np.arange(n + 1))
+    order, bounds = group_by_label(labels, n)
     groups = [order[bounds[k] : bounds[k + 1]] for k in range(n)]
     P = np.asarray(uv, dtype=np.float64) * size
     for k, faces in enumerate(groups):  # loop over charts

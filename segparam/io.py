@@ -48,15 +48,23 @@ __all__ = [
     "load_mesh",
     "mesh_stem",
     "name_max",
+    "split_suffix",
     "staged_outputs",
 ]
 
 SUPPORTED_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf", ".gii", ".gii.gz")
+_GII_GZ = ".gii.gz"
 
 
-def _suffix(path: Path) -> str:
-    name = path.name.lower()
-    return ".gii.gz" if name.endswith(".gii.gz") else path.suffix.lower()
+def split_suffix(path: str | os.PathLike) -> tuple[str, str]:
+    """A file name's stem and its mesh suffix, lower-case: ``("lh.pial", ".gii.gz")`` for
+    ``lh.pial.GII.GZ``, ``("scan", ".obj")`` for ``scan.OBJ`` (``.gii.gz`` is the one suffix of
+    two parts). The one place that knows it: reading, output names and batch inputs use it."""
+    name = Path(path).name
+    if name.lower().endswith(_GII_GZ):
+        return name[: -len(_GII_GZ)], _GII_GZ
+    plain = Path(name)
+    return plain.stem, plain.suffix.lower()
 
 
 def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
@@ -84,7 +92,7 @@ def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         raise MeshFileError(f"{path}: no such file")
     if path.is_dir():
         raise MeshFileError(f"{path}: is a directory, not a mesh file")
-    suffix = _suffix(path)
+    suffix = split_suffix(path)[1]
     if suffix not in SUPPORTED_SUFFIXES:
         raise MeshFileError(
             f"{path}: unsupported format {suffix or '(none)'}; "
@@ -98,8 +106,8 @@ def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     if not data:
         raise MeshFileError(f"{path}: file is empty")
     try:
-        if suffix in (".gii", ".gii.gz"):
-            V, F = _load_gifti(data, gz=suffix == ".gii.gz")
+        if suffix in (".gii", _GII_GZ):
+            V, F = _load_gifti(data, gz=suffix == _GII_GZ)
         elif suffix in _READERS:
             V, F = _READERS[suffix](data)
         else:
@@ -309,20 +317,49 @@ def _join_continued(match: re.Match) -> bytes:
     return _OBJ_LINE_BREAK.sub(b" ", run) + b"\n" * run.count(b"\n")
 
 
-def _obj_vertices(text: bytes, lines: np.ndarray) -> np.ndarray:
-    """(n, 3) coordinates of the ``v`` lines (keyword blanked) on file lines ``lines``."""
+def _obj_rows(
+    text: bytes, lines: np.ndarray, dtype, *, element: str, items: str, need: str, number: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The numbers of one kind of OBJ line (keyword blanked) on file lines ``lines``, each line
+    checked to hold at least 3 of them.
+
+    ``element``, ``items``, ``need`` and ``number`` word the errors: "``element`` on line 7 has 2
+    ``items``; ``need``" and "``element`` on line 7 has ``number``: 'x'".
+
+    Returns
+    -------
+    values : (k,) ndarray of ``dtype``
+        Every number, in order.
+    token_line : (k,) int64 ndarray
+        Row (0-based, among these lines) of each number.
+    counts : (rows,) int64 ndarray
+        Numbers per row.
+    """
     token_line, counts = _token_table(text)
     short = np.flatnonzero(counts < 3)
     if len(short):
         i = short[0]
-        raise MeshFileError(
-            f"vertex on line {lines[i]} has {counts[i]} coordinates; a vertex needs x y z"
-        )
-    values = _numbers(text, len(token_line), np.float64)
+        raise MeshFileError(f"{element} on line {lines[i]} has {counts[i]} {items}; {need}")
+    values = _numbers(text, len(token_line), dtype)
     if values is None:
-        row, token = _bad_token(text, _NOT_A_FLOAT)
+        pattern = _NOT_A_FLOAT if np.dtype(dtype).kind == "f" else _NOT_AN_INT
+        row, token = _bad_token(text, pattern)
         where = f" on line {lines[row]}" if row >= 0 else ""
-        raise MeshFileError(f"vertex{where} has a coordinate that is not a number: {token!r}")
+        raise MeshFileError(f"{element}{where} has {number}: {token!r}")
+    return values, token_line, counts
+
+
+def _obj_vertices(text: bytes, lines: np.ndarray) -> np.ndarray:
+    """(n, 3) coordinates of the ``v`` lines (keyword blanked) on file lines ``lines``."""
+    values, _, counts = _obj_rows(
+        text,
+        lines,
+        np.float64,
+        element="vertex",
+        items="coordinates",
+        need="a vertex needs x y z",
+        number="a coordinate that is not a number",
+    )
     if (counts == 3).all():
         return values.reshape(-1, 3)
     first = np.cumsum(counts) - counts
@@ -341,18 +378,15 @@ def _obj_faces(text: bytes, lines: np.ndarray, before: np.ndarray, V: np.ndarray
             line = lines[text.count(b"\n", 0, lone.start())]
             raise MeshFileError(f"face on line {line} has a corner without a vertex index")
         text = re.sub(rb"/[^ \n]*", b"", text)
-    token_line, counts = _token_table(text)
-    few = np.flatnonzero(counts < 3)
-    if len(few):
-        i = few[0]
-        raise MeshFileError(
-            f"face on line {lines[i]} has {counts[i]} corners; a face needs at least 3"
-        )
-    raw = _numbers(text, len(token_line), np.int64)
-    if raw is None:
-        row, token = _bad_token(text, _NOT_AN_INT)
-        where = f" on line {lines[row]}" if row >= 0 else ""
-        raise MeshFileError(f"face{where} has a vertex index that is not a whole number: {token!r}")
+    raw, token_line, counts = _obj_rows(
+        text,
+        lines,
+        np.int64,
+        element="face",
+        items="corners",
+        need="a face needs at least 3",
+        number="a vertex index that is not a whole number",
+    )
     zero = np.flatnonzero(raw == 0)
     if len(zero):
         line = lines[token_line[zero[0]]]
@@ -954,9 +988,7 @@ def _clip(name: str, limit: int) -> str:
 
 def mesh_stem(path: str | os.PathLike) -> str:
     """A mesh file's name without its suffix (``lh.pial.gii.gz`` -> ``lh.pial``), or ``mesh``."""
-    name = Path(path).name
-    stem = name[: -len(".gii.gz")] if name.lower().endswith(".gii.gz") else Path(name).stem
-    return stem or "mesh"
+    return split_suffix(path)[0] or "mesh"
 
 
 def _existing(path: Path) -> Path:

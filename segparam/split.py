@@ -41,8 +41,11 @@ from .mesh import (
     check_mesh,
     face_areas,
     face_normals,
+    group_by_label,
     is_disk,
     label_topology,
+    plane_basis,
+    submesh,
     unit_frame,
     vertex_adjacency,
 )
@@ -181,11 +184,6 @@ class ChartSet:
     first_pass_bijective: np.ndarray
 
 
-def _submesh(F: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    vertices, local = np.unique(F[faces].ravel(), return_inverse=True)
-    return vertices.astype(np.int64), local.reshape(-1, 3).astype(np.int64)
-
-
 def project_chart(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """Orthogonal projection onto the least-squares plane, oriented to keep the winding.
 
@@ -200,10 +198,7 @@ def project_chart(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     if np.linalg.norm(n) < 1e-300:
         n = np.linalg.svd(V - V.mean(axis=0), full_matrices=False)[2][-1]
     n = n / np.linalg.norm(n)
-    helper = np.array([1.0, 0, 0]) if abs(n[0]) < 0.9 else np.array([0, 1.0, 0])
-    b1 = np.cross(n, helper)
-    b1 /= np.linalg.norm(b1)
-    b2 = np.cross(n, b1)
+    (b1,), (b2,) = plane_basis(n[None])
     X = V - V.mean(axis=0)
     return np.stack([X @ b1, X @ b2], axis=1)
 
@@ -275,8 +270,7 @@ def parameterize_charts(
     center, size = unit_frame(V)
     V = (V - center) / size  # scale-free; chart uvs are scaled back below
     n_src = int(labels.max()) + 1
-    order = np.argsort(labels, kind="stable")
-    bounds = np.searchsorted(labels[order], np.arange(n_src + 1))
+    order, bounds = group_by_label(labels, n_src)
     sources = [order[bounds[s] : bounds[s + 1]] for s in range(n_src)]
     sub = _submeshes(F, labels, order, bounds)
     # Small charts, all at once: already in mesh indices and units.
@@ -367,7 +361,7 @@ class _Submeshes:
 
     Chart ``s`` has the mesh vertices ``vertices[vptr[s] : vptr[s + 1]]`` (ascending) and the
     faces ``local_F[bounds[s] : bounds[s + 1]]`` in those local indices, in the order of
-    ``order`` (the faces sorted by chart): what ``_submesh(F, faces)`` gives chart by chart.
+    ``order`` (the faces sorted by chart): what :func:`segparam.mesh.submesh` gives chart by chart.
     """
 
     vertices: np.ndarray
@@ -431,10 +425,7 @@ def _project_union(V: np.ndarray, F: np.ndarray, vert_chart: np.ndarray, n_chart
     length = np.linalg.norm(n, axis=1)
     ok = length >= 1e-300
     n = n / np.where(ok, length, 1.0)[:, None]
-    helper = np.where((np.abs(n[:, 0]) < 0.9)[:, None], [[1.0, 0, 0]], [[0, 1.0, 0]])
-    b1 = np.cross(n, helper)
-    b1 /= np.linalg.norm(b1, axis=1, keepdims=True)
-    b2 = np.cross(n, b1)
+    b1, b2 = plane_basis(n)
     count = np.bincount(vert_chart, minlength=n_charts)
     mean = np.stack([np.bincount(vert_chart, V[:, j], minlength=n_charts) for j in range(3)], 1)
     X = V - (mean / np.maximum(count, 1)[:, None])[vert_chart]
@@ -603,7 +594,7 @@ def _try_piece(
     seed: int,
 ) -> Chart | None:
     """A bijective chart for these faces, or None if the piece must be split."""
-    vertices, local_F = _submesh(F, faces)
+    vertices, local_F = submesh(F, faces)
     Vl = V[vertices]
     small = len(faces) < cfg.min_faces or len(vertices) < MIN_POINTS
     if not small and depth <= cfg.max_depth:

@@ -28,11 +28,18 @@ import segparam.io
 import segparam.pipeline
 from segparam import cli
 from segparam.artifacts import stage_paths
-from segparam.batch import assign_folders, process_one
+from segparam.batch import assign_folders, expand_inputs, process_one
 from segparam.cli import main
 from segparam.errors import ConfigError, MeshFileError, SegparamError, SolverError
 from segparam.export import write_obj
-from segparam.io import ATLAS_SUFFIXES, fit_name, load_mesh
+from segparam.io import (
+    ATLAS_SUFFIXES,
+    SUPPORTED_SUFFIXES,
+    fit_name,
+    load_mesh,
+    mesh_stem,
+    split_suffix,
+)
 from segparam.pipeline import MAX_RESOLUTION, MAX_SEED, PipelineConfig, build_atlas, chart_room
 
 FAST = ["--resolution", "128", "--no-remesh", "--quiet"]
@@ -548,3 +555,23 @@ def test_a_batch_row_names_the_reason_of_a_refusal(tmp_path):
     report = tmp_path / "out" / "parts" / "report.json"
     assert not report.exists()
     assert json.dumps(row)  # a plain row
+
+
+@pytest.mark.parametrize(
+    "name, stem, suffix",
+    [
+        ("lh.pial.gii.gz", "lh.pial", ".gii.gz"),
+        ("lh.pial.GII.GZ", "lh.pial", ".gii.gz"),
+        ("lh.pial.Gii", "lh.pial", ".gii"),
+        ("scan.OBJ", "scan", ".obj"),
+        ("archive.tar.gz", "archive.tar", ".gz"),
+        ("noext", "noext", ""),
+    ],
+)
+def test_split_suffix_knows_gii_gz_in_any_case(name, stem, suffix, tmp_path):
+    assert split_suffix(tmp_path / name) == (stem, suffix)
+    assert mesh_stem(name) == stem
+    if suffix in SUPPORTED_SUFFIXES:  # the batch takes it from a folder, whatever its case
+        write_obj(tmp_path / "m.obj", *tri_grid(2, 2))
+        (tmp_path / "m.obj").rename(tmp_path / name)
+        assert expand_inputs([tmp_path]) == [tmp_path / name]
