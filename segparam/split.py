@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import logging
 import os
 import signal
@@ -282,16 +283,16 @@ def parameterize_charts(
     rest = np.flatnonzero(~in_bulk).tolist()  # the charts that need the solver alone
     jobs = cfg.n_jobs or os.cpu_count() or 1
     parallel = jobs > 1 and len(rest) > 1 and len(F) >= PARALLEL_MIN_FACES
-    # The crease-aware face affinity splits failing charts. It is normalized over the whole mesh,
-    # so it is built here once (lazily when serial) and each chart gets its restriction: the
-    # result does not depend on n_jobs.
-    W = face_affinity(V, F) if parallel else None
+    affinity = _MeshAffinity(V, F)
 
     def task(src: int) -> tuple:
+        """The arguments of :func:`_solve_source` for chart ``src`` (before ``cfg, seed``).
+
+        A worker process cannot reach the mesh: it gets the chart's affinity at once.
+        """
         faces = sources[src]
         vertices, local_F = sub.of(src)
-        W_src = None if W is None else W[faces][:, faces]
-        return V[vertices], local_F, W_src, src
+        return V[vertices], local_F, affinity.of_chart(faces, now=parallel), src
 
     results: dict[int, tuple[list[Chart], bool]] = {}
     if parallel:
@@ -316,19 +317,8 @@ def parameterize_charts(
             raise
         pool.shutdown()
     else:
-        cache: list[sp.csr_matrix] = []
-
-        def affinity_of(src: int):  # built on the first chart that must be split
-            def restricted() -> sp.csr_matrix:
-                if not cache:
-                    cache.append(face_affinity(V, F))
-                return cache[0][sources[src]][:, sources[src]]
-
-            return restricted
-
         for done, src in enumerate(rest, len(final) + 1):  # loop over the charts left
-            Vs, Fs, _, _ = task(src)
-            results[src] = _solve_source(Vs, Fs, affinity_of(src), src, cfg, seed)
+            results[src] = _solve_source(*task(src), cfg, seed)
             if progress is not None:
                 progress(done)
 
@@ -552,23 +542,55 @@ def _bulk_charts(
     return out
 
 
+class _MeshAffinity:
+    """The crease-aware face affinity (:func:`segment.face_affinity`) that splits failing charts.
+
+    It is normalized over the whole mesh, so it is built once for the mesh, on first use (most
+    runs split no chart), and every chart gets its restriction: a split does not depend on
+    ``n_jobs``.
+    """
+
+    def __init__(self, V: np.ndarray, F: np.ndarray) -> None:
+        self._V, self._F = V, F
+        self._W: sp.csr_matrix | None = None
+
+    def restricted(self, faces: np.ndarray) -> sp.csr_matrix:
+        """The affinity among ``faces`` (mesh face indices), in their order."""
+        if self._W is None:
+            self._W = face_affinity(self._V, self._F)
+        return self._W[faces][:, faces]
+
+    def of_chart(self, faces: np.ndarray, *, now: bool) -> Callable[[], sp.csr_matrix]:
+        """What :func:`_solve_source` calls for a chart's affinity when it must split the chart:
+        restricted when called (``now=False``), or already restricted (``now=True``, for a
+        worker process, which cannot reach the mesh)."""
+        if now:
+            return functools.partial(_given, self.restricted(faces))
+        return functools.partial(self.restricted, faces)
+
+
+def _given(W: sp.csr_matrix) -> sp.csr_matrix:
+    return W
+
+
 def _solve_source(
     V: np.ndarray,
     F: np.ndarray,
-    W: sp.csr_matrix | Callable[[], sp.csr_matrix],
+    affinity: Callable[[], sp.csr_matrix],
     src: int,
     cfg: SplitConfig,
     seed: int,
 ) -> tuple[list[Chart], bool]:
     """Map one segmentation chart, bisecting the pieces that fail (the per-chart task).
 
-    ``V, F`` are the chart's own vertices and faces; ``W`` its face affinity, or a function that
-    builds it (called only if the chart must be split). Returns the bijective pieces, in
-    chart-local indices, and whether the first try succeeded.
+    ``V, F`` are the chart's own vertices and faces; ``affinity()`` gives its face affinity
+    (:meth:`_MeshAffinity.of_chart`; called only if the chart must be split). Returns the
+    bijective pieces, in chart-local indices, and whether the first try succeeded.
     """
     stack = [(np.arange(len(F)), 0)]
     pieces: list[Chart] = []
     first = False
+    W = None
     while stack:
         faces, depth = stack.pop()
         chart = _try_piece(V, F, faces, src, depth, cfg, seed)
@@ -577,8 +599,8 @@ def _solve_source(
         if chart is not None:
             pieces.append(chart)
             continue
-        if callable(W):
-            W = W()
+        if W is None:
+            W = affinity()
         parts = divide(W, faces, seed=seed)
         stack.extend((p, depth + 1) for p in reversed(parts) if len(p))
     return pieces, first
