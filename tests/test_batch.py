@@ -1,7 +1,6 @@
 import csv
 import json
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -122,15 +121,12 @@ def test_failures_are_counted_on_stderr(collection, scheduler, tmp_path, capsys)
 def test_rerun_skips_what_is_done(first_run, collection, scheduler):
     outdir, _ = first_run
     mtimes = {p: p.stat().st_mtime_ns for p in outdir.glob("*/*")}
-    t0 = time.perf_counter()
     code = run_cli([collection, "-o", outdir, "--scheduler", scheduler, *FAST])
-    elapsed = time.perf_counter() - t0
     assert code == 1  # the broken file is tried again, and fails again
     rows, doc = read_summary(outdir)
     assert doc["counts"] == {"done": 0, "skipped": 3, "failed": 1, "pending": 0}
     assert {p: p.stat().st_mtime_ns for p in outdir.glob("*/*")} == mtimes  # nothing rewritten
     assert int(rows["grid"]["charts"]) >= 1  # the figures of the earlier run are kept
-    assert elapsed < 5
 
 
 def test_changed_seed_or_settings_reprocess(collection, scheduler, tmp_path):

@@ -401,13 +401,9 @@ def test_coordinates_beyond_float64_geometry_are_an_error():
             call(V * 1e200, F)
 
 
-def test_coordinates_of_1e100_give_an_atlas_or_a_segparam_error():
+def test_coordinates_of_1e100_give_an_atlas():
     V, F = wavy_grid()
-    try:
-        atlas = build_atlas(V * 1e100, F, CFG)
-    except SegparamError:
-        return
-    assert_valid_atlas(atlas)
+    assert_valid_atlas(build_atlas(V * 1e100, F, CFG))  # every stage works in the unit frame
 
 
 def test_parser_warnings_stay_off_stderr(tmp_path, capsys):
@@ -508,8 +504,9 @@ def test_same_input_and_seed_give_the_same_files(tmp_path, capsys):
     _compare_outputs(tmp_path / "a", tmp_path / "b")
 
 
-@pytest.mark.slow
 def test_a_fresh_process_gives_the_same_files(tmp_path, capsys):
+    """No state of this process (hash seed, caches, imports) shapes the atlas: a new process with
+    another hash seed writes the same files. Small mesh: the cost is the process start (~2 s)."""
     V, F, _ = messy_mesh()
     path = tmp_path / "messy.obj"
     write_obj(path, V, F)
