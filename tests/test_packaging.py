@@ -2,6 +2,7 @@
 
 import ast
 import importlib.metadata as md
+import json
 import re
 import sys
 from pathlib import Path
@@ -55,3 +56,33 @@ def test_the_version_is_written_once_in_the_package():
     except md.PackageNotFoundError:
         pytest.skip("segparam is not installed")
     assert installed == segparam.__version__
+
+
+def test_the_tests_import_the_installed_package_not_the_source_tree():
+    """CI installs segparam (not editable) and runs plain ``pytest``, which does not put the
+    repository on sys.path (``python -m pytest`` would: the tests would then import the source
+    tree and miss a file the package fails to install). Skipped where segparam is not installed
+    or installed editable, as in development (``PYTHONPATH=$PWD``)."""
+    # Metadata found through the repository itself (the segparam.egg-info a build leaves) is
+    # not an installation.
+    repo = PYPROJECT.parent
+    elsewhere = [p for p in sys.path if Path(p or ".").resolve() != repo]
+    dist = next(iter(md.distributions(name="segparam", path=elsewhere)), None)
+    if dist is None:
+        pytest.skip("segparam is not installed")
+    direct = json.loads(dist.read_text("direct_url.json") or "{}")
+    if direct.get("dir_info", {}).get("editable", False):
+        pytest.skip("segparam is installed editable")
+    installed = Path(dist.locate_file("segparam/__init__.py")).resolve()
+    assert Path(segparam.__file__).resolve() == installed, (
+        f"the tests import {segparam.__file__}, not the installed {installed}: run `pytest`, "
+        "not `python -m pytest`, from the repository"
+    )
+
+
+def test_the_readme_test_command_is_what_ci_runs():
+    ci = (PYPROJECT.parent / ".ci" / "run").read_text(encoding="utf-8").strip().splitlines()
+    command = ci[-1]  # .ci/run ends with it, after making and activating a fresh venv
+    assert command.startswith("pip install") and "pytest" in command
+    readme = (PYPROJECT.parent / "README.md").read_text(encoding="utf-8")
+    assert f". .venv/bin/activate && {command}\n" in readme
