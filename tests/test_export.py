@@ -446,6 +446,7 @@ def test_save_atlas_does_not_import_trimesh(tmp_path):
         [sys.executable, "-c", code, str(tmp_path / "atlas.npz"), str(out)],
         capture_output=True,
         text=True,
+        cwd=tmp_path,  # not the repository: the child imports the package the tests import
     )
     assert result.returncode == 0, result.stderr
     assert (out / "mesh.glb").exists()

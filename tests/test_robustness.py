@@ -277,7 +277,7 @@ def test_bad_file_in_a_fresh_process_has_no_traceback(tmp_path):
     path = _truncated(tmp_path / "cut mesh.stl", 0.5)
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "segparam.cli", "atlas", str(path), "-o", str(out)]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr
     assert len(proc.stderr.splitlines()) == 1 and path.name in proc.stderr
@@ -513,7 +513,8 @@ def test_a_fresh_process_gives_the_same_files(tmp_path, capsys):
     assert run_atlas(path, tmp_path / "a", capsys, "--seed", "3")[0] == 0
     cmd = [sys.executable, "-m", "segparam.cli", "atlas", str(path), "-o", str(tmp_path / "b")]
     env = {**os.environ, "PYTHONHASHSEED": "12345"}
-    proc = subprocess.run([*cmd, *FAST, "--seed", "3"], capture_output=True, env=env, timeout=300)
+    argv = [*cmd, *FAST, "--seed", "3"]  # cwd: not the repository, which python -m would import
+    proc = subprocess.run(argv, capture_output=True, env=env, timeout=300, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     _compare_outputs(tmp_path / "a", tmp_path / "b")
 
