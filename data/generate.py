@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from segparam.io import write_obj
+from segparam.export import write_obj
 from segparam.synthetic import brain_like_parcels, brain_like_surface
 
 HERE = Path(__file__).resolve().parent

@@ -12,7 +12,6 @@ paths (a shared filesystem), since tasks carry paths, not meshes.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import csv
 import glob
@@ -22,7 +21,6 @@ import json
 import logging
 import os
 import signal
-import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -39,12 +37,11 @@ __all__ = [
     "DONE_MARKER",
     "SUMMARY_FIELDS",
     "BatchResult",
-    "add_batch_parser",
     "assign_folders",
-    "cmd_batch",
     "expand_inputs",
     "fingerprint",
     "process_one",
+    "require_dask",
     "run_batch",
 ]
 
@@ -74,7 +71,7 @@ _MISSING_DASK = "segparam batch needs Dask: pip install 'segparam[batch]'"
 _GLOB_CHARS = frozenset("*?[")
 
 
-def _import_dask() -> Any:
+def require_dask() -> Any:
     """The ``distributed`` module, or a :class:`SegparamError` saying how to install it."""
     try:
         import dask.distributed as distributed
@@ -87,21 +84,14 @@ def _import_dask() -> Any:
 # Inputs
 
 
-def _mesh_stem(path: Path) -> str:
-    """The file name without its mesh suffix (``lh.pial.gii.gz`` -> ``lh.pial``)."""
-    from .io import mesh_stem
-
-    return mesh_stem(path)
-
-
 def _is_mesh_file(path: Path) -> bool:
-    from .io import SUPPORTED_SUFFIXES
+    """A visible file with a suffix :func:`segparam.io.load_mesh` reads (any case)."""
+    from .io import SUPPORTED_SUFFIXES, split_suffix
 
-    name = path.name.lower()
     return (
-        not name.startswith(".")
+        not path.name.startswith(".")
         and path.is_file()
-        and any(name.endswith(suffix) for suffix in SUPPORTED_SUFFIXES)
+        and split_suffix(path)[1] in SUPPORTED_SUFFIXES
     )
 
 
@@ -177,13 +167,13 @@ def assign_folders(paths: Iterable[Path], *, limit: int | None = None) -> list[s
     (default: 255, the usual file-system limit) keeps the beginning of its stem and gets a hash
     of the whole stem (:func:`segparam.io.fit_name`).
     """
-    from .io import DEFAULT_NAME_MAX, fit_name
+    from .io import DEFAULT_NAME_MAX, fit_name, mesh_stem
 
     limit = DEFAULT_NAME_MAX if limit is None else limit
     used: set[str] = set()
     names = []
     for path in paths:
-        stem = _mesh_stem(Path(path)) or "mesh"
+        stem = mesh_stem(path)
         name, k = fit_name(stem, limit=limit), 1
         while name.casefold() in used:
             k += 1
@@ -274,7 +264,14 @@ def process_one(
         One summary row (:data:`SUMMARY_FIELDS`): status ``done``, ``skipped`` or ``failed``
         (with the one-line reason: the :class:`SegparamError` message, else ``Type: message``).
     """
-    from .io import atlas_file_names, atlas_stem, atomic_path, check_output_folder, load_mesh
+    from .io import (
+        atlas_file_names,
+        atlas_stem,
+        atomic_path,
+        check_output_folder,
+        load_mesh,
+        mesh_stem,
+    )
     from .pipeline import build_atlas, config_from_dict
 
     path, folder = Path(path), Path(outdir)
@@ -283,7 +280,7 @@ def process_one(
         skipped = _done_row(path, folder, config_dict, seed)
         if skipped is not None:
             return skipped
-        stem = atlas_stem(_mesh_stem(path), folder)
+        stem = atlas_stem(mesh_stem(path), folder)
         names = [*atlas_file_names(stem).values(), DONE_MARKER]
         check_output_folder(folder, names, inputs=[path])  # before any work
         # One task per mesh already keeps every worker busy: no process pool inside a task.
@@ -354,10 +351,9 @@ class BatchResult:
 
 def _write_summary(outdir: Path, rows: list[dict], meta: dict[str, Any]) -> None:
     """``summary.csv`` and ``summary.json``, each replaced atomically."""
-    from .io import atomic_path
-    from .pipeline import _clean_json
+    from .io import atomic_path, json_safe
 
-    rows = _clean_json(rows)
+    rows = json_safe(rows)
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=SUMMARY_FIELDS, lineterminator="\n")
     writer.writeheader()
@@ -410,6 +406,7 @@ def run_batch(
     outdir : str or PathLike
         Gets one folder per mesh (see :func:`assign_folders`) and ``summary.csv/.json``.
     config : PipelineConfig, optional
+        The settings (default ``PipelineConfig()``); the command line builds it from its options.
     seed : int
     recursive : bool
     workers : int, optional
@@ -440,7 +437,7 @@ def run_batch(
     seed = check_seed(seed)
     outdir = Path(outdir).expanduser().resolve()
     check_output_folder(outdir, SUMMARY_FILES)  # writable, not a file: before any work
-    distributed = _import_dask()
+    distributed = require_dask()
     t_start = time.perf_counter()
     config = config or PipelineConfig()
     paths = expand_inputs(inputs, recursive=recursive, exclude=outdir)
@@ -510,107 +507,3 @@ def run_batch(
             if own_cluster is not None:
                 own_cluster.close()
     return BatchResult(rows=rows, outdir=outdir, seconds=time.perf_counter() - t_start)
-
-
-# ---------------------------------------------------------------------------------------------
-# Command line
-
-
-def add_batch_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    """Add the ``batch`` subcommand (``cmd_batch``) to the CLI's subparsers."""
-    from .cli import add_pipeline_options
-
-    p = subparsers.add_parser(
-        "batch",
-        help="many mesh files -> one atlas folder each, on Dask (local cluster or a scheduler)",
-        description=(
-            "Make the atlas of every mesh in INPUTS into OUTDIR/<stem>/ (as 'segparam atlas'), "
-            "one Dask task per mesh, and list them in OUTDIR/summary.csv and summary.json. "
-            "A rerun skips the meshes already done with the same settings."
-        ),
-    )
-    p.add_argument("inputs", nargs="+", help="mesh files, folders or glob patterns")
-    p.add_argument("-o", "--output", required=True, help="output folder (OUTDIR)")
-    p.add_argument("--recursive", action="store_true", help="look into sub-folders of folders")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument(
-        "--workers",
-        type=int,
-        help="worker processes of the local cluster, 1 to 4096 (default: CPUs)",
-    )
-    where.add_argument(
-        "--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://host:8786"
-    )
-    add_pipeline_options(p)
-    p.set_defaults(func=cmd_batch)
-    return p
-
-
-def cmd_batch(args: argparse.Namespace) -> int:
-    """Run ``segparam batch``: 0 if every mesh is done or skipped, 1 if some failed, 130 on Ctrl-C.
-
-    Usage errors (no input matched, a bad config, Dask missing) raise :class:`SegparamError`,
-    which the CLI prints as one line with exit code 2.
-    """
-    from .cli import _config_from_args
-    from .io import check_output_folder
-
-    if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS:
-        raise SegparamError(
-            f"argument --workers: must be from 1 to {MAX_WORKERS}, got {args.workers}"
-        )
-    config = _config_from_args(args)
-    check_output_folder(args.output, SUMMARY_FILES)  # before Dask starts or any mesh is read
-    _import_dask()
-    # Dask's own INFO chatter (scheduler start, workers retired) is noise on a terminal.
-    logging.getLogger("distributed").setLevel(logging.WARNING)
-    outdir = Path(args.output)
-    paths = expand_inputs(args.inputs, recursive=args.recursive, exclude=outdir)
-    bar = None
-    if not args.quiet:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(paths), unit="mesh", desc="batch", file=sys.stderr)
-
-    def progress(row: dict[str, Any]) -> None:
-        if bar is None:
-            return
-        if row["status"] == "failed":
-            reason = row["reason"]  # most reasons start with the file name already
-            where = "" if reason.startswith(row["input"]) else f"{row['input']}: "
-            bar.write(f"failed: {where}{reason}", file=sys.stderr)
-        bar.update(1)
-
-    try:
-        result = run_batch(
-            paths,
-            outdir,
-            config,
-            seed=args.seed,
-            recursive=args.recursive,
-            workers=args.workers,
-            scheduler=args.scheduler,
-            progress=progress,
-        )
-    except KeyboardInterrupt:
-        if bar is not None:
-            bar.close()  # before the message, so that it does not end up on the bar's line
-        print(
-            f"segparam: interrupted; finished meshes stay done (see {outdir / 'summary.csv'})",
-            file=sys.stderr,
-        )
-        return 130
-    finally:
-        if bar is not None:
-            bar.close()
-    total = len(result.rows)
-    summary = result.outdir / "summary.csv"
-    if not args.quiet:
-        print(
-            f"{total} meshes: {result.count('done')} done, {result.count('skipped')} skipped, "
-            f"{result.n_failed} failed in {result.seconds:.1f}s; wrote {summary}"
-        )
-    if result.n_failed:
-        print(f"{result.n_failed} of {total} failed; see {summary}", file=sys.stderr)
-        return 1
-    return 0

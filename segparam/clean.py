@@ -1,4 +1,4 @@
-"""Stage 1, clean: turn a raw triangle soup into a manifold, consistently oriented surface.
+"""Cleaning: turn a raw triangle soup into a manifold, consistently oriented surface.
 
 Real inputs are messy: STL files repeat every vertex once per face, scans carry slivers and folded
 duplicates, CAD exports glue parts along shared edges, and some meshes are inside out. :func:`clean`

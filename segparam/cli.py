@@ -118,15 +118,14 @@ DEFAULT_CHART_NAME = "brain_parcel.obj"
 
 
 def _cmd_chart(args: argparse.Namespace) -> int:
+    from .export import render_uv_layout, write_obj
     from .io import (
         check_output_files,
         fit_name,
         load_mesh,
         mesh_stem,
         name_max,
-        render_uv_layout,
         staged_outputs,
-        write_obj,
     )
     from .parameterize import parameterize_chart
 
@@ -395,6 +394,104 @@ def add_pipeline_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
 
 
+def _add_batch_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """The ``batch`` subcommand (:func:`_cmd_batch`): many meshes, on Dask."""
+    p = subparsers.add_parser(
+        "batch",
+        help="many mesh files -> one atlas folder each, on Dask (local cluster or a scheduler)",
+        description=(
+            "Make the atlas of every mesh in INPUTS into OUTDIR/<stem>/ (as 'segparam atlas'), "
+            "one Dask task per mesh, and list them in OUTDIR/summary.csv and summary.json. "
+            "A rerun skips the meshes already done with the same settings."
+        ),
+    )
+    p.add_argument("inputs", nargs="+", help="mesh files, folders or glob patterns")
+    p.add_argument("-o", "--output", required=True, help="output folder (OUTDIR)")
+    p.add_argument("--recursive", action="store_true", help="look into sub-folders of folders")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers",
+        type=int,
+        help="worker processes of the local cluster, 1 to 4096 (default: CPUs)",
+    )
+    where.add_argument(
+        "--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://host:8786"
+    )
+    add_pipeline_options(p)
+    p.set_defaults(func=_cmd_batch)
+    return p
+
+
+def _cmd_batch(args: argparse.Namespace) -> int:
+    """``segparam batch``: 0 if every mesh is done or skipped, 1 if some failed, 130 on Ctrl-C.
+
+    Usage errors (no input matched, a bad config, Dask missing) raise :class:`SegparamError`,
+    which :func:`main` prints as one line with exit code 2.
+    """
+    from .batch import MAX_WORKERS, SUMMARY_FILES, expand_inputs, require_dask, run_batch
+    from .io import check_output_folder
+
+    if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS:
+        raise SegparamError(
+            f"argument --workers: must be from 1 to {MAX_WORKERS}, got {args.workers}"
+        )
+    config = _config_from_args(args)
+    check_output_folder(args.output, SUMMARY_FILES)  # before Dask starts or any mesh is read
+    require_dask()
+    # Dask's own INFO chatter (scheduler start, workers retired) is noise on a terminal.
+    logging.getLogger("distributed").setLevel(logging.WARNING)
+    outdir = Path(args.output)
+    paths = expand_inputs(args.inputs, recursive=args.recursive, exclude=outdir)
+    bar = None
+    if not args.quiet:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(paths), unit="mesh", desc="batch", file=sys.stderr)
+
+    def progress(row: dict) -> None:
+        if bar is None:
+            return
+        if row["status"] == "failed":
+            reason = row["reason"]  # most reasons start with the file name already
+            where = "" if reason.startswith(row["input"]) else f"{row['input']}: "
+            bar.write(f"failed: {where}{reason}", file=sys.stderr)
+        bar.update(1)
+
+    try:
+        result = run_batch(
+            paths,
+            outdir,
+            config,
+            seed=args.seed,
+            recursive=args.recursive,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            progress=progress,
+        )
+    except KeyboardInterrupt:
+        if bar is not None:
+            bar.close()  # before the message, so that it does not end up on the bar's line
+        print(
+            f"segparam: interrupted; finished meshes stay done (see {outdir / 'summary.csv'})",
+            file=sys.stderr,
+        )
+        return 130
+    finally:
+        if bar is not None:
+            bar.close()
+    total = len(result.rows)
+    summary = result.outdir / "summary.csv"
+    if not args.quiet:
+        print(
+            f"{total} meshes: {result.count('done')} done, {result.count('skipped')} skipped, "
+            f"{result.n_failed} failed in {result.seconds:.1f}s; wrote {summary}"
+        )
+    if result.n_failed:
+        print(f"{result.n_failed} of {total} failed; see {summary}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="segparam", description="Triangle meshes to UV atlases (Hessian eigenfunctions)."
@@ -421,9 +518,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_pipeline_options(atlas)
     atlas.set_defaults(func=_cmd_atlas)
 
-    from .batch import add_batch_parser
-
-    add_batch_parser(sub)
+    _add_batch_parser(sub)
 
     def stage(name: str, help_: str, inp: str, out: str, func, options=()) -> None:
         p = sub.add_parser(name, help=help_)
@@ -438,18 +533,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     stage(
         "remesh",
-        "stage 1-2: load, clean and remesh a mesh file -> OUT.npz + OUT.json",
+        "load, clean and remesh a mesh file -> OUT.npz + OUT.json",
         "mesh file",
         "artifact (.npz)",
         _cmd_remesh,
         [("--remesh", {"choices": ["auto", "on", "off"]})],
     )
-    stage(
-        "segment", "stage 3: charts of a remesh artifact", "remesh .npz", "artifact", _cmd_segment
-    )
+    stage("segment", "charts of a remesh artifact", "remesh .npz", "artifact", _cmd_segment)
     stage(
         "parameterize",
-        "stage 4-5: map every chart bijectively (split + retry)",
+        "map every chart bijectively (split + retry)",
         "segment .npz",
         "artifact (.npz)",
         _cmd_parameterize,
@@ -457,7 +550,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     stage(
         "pack",
-        "stage 6-7: pack the charts and write the atlas files",
+        "pack the charts and write the atlas files",
         "parameterize .npz",
         "output folder",
         _cmd_pack,

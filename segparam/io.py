@@ -1,29 +1,30 @@
-"""Mesh files in and out: every file format segparam reads or writes lives here.
+"""Mesh files in, and where outputs go.
 
-Reading: OBJ, PLY and OFF (readers of our own, numpy over the whole file: relative OBJ indices,
-any whitespace, polygons triangulated inside their outline, PLY element counts checked against the
-data), STL and GLB/GLTF (trimesh) and GIfTI surfaces ``.gii`` / ``.gii.gz`` (nibabel, for cortical
-surfaces). Writing is atomic: each file is written under a temporary name in the destination
-folder and renamed into place, so a failed run leaves no partial file. Written coordinates keep
-their float64 value (OBJ text with 17 digits; a GLB far from the origin stores its offset as a
-float64 node translation).
+Reading (:func:`load_mesh`): OBJ, PLY and OFF (readers of our own, numpy over the whole file:
+relative OBJ indices, any whitespace, polygons triangulated inside their outline, PLY element
+counts checked against the data), STL and GLB/GLTF (trimesh) and GIfTI surfaces ``.gii`` /
+``.gii.gz`` (nibabel, for cortical surfaces).
+
+Writing safely, for every file segparam writes: output folders and names are checked before any
+work (:func:`check_output_folder`, :func:`fit_name`); a file is written under a temporary name and
+renamed into place (:func:`atomic_path`); a set of files replaces an earlier set all or nothing
+(:func:`staged_outputs`). What an atlas writes is :mod:`segparam.export`.
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
-import functools
 import gzip
 import hashlib
 import logging
 import math
 import os
 import re
-import struct
 import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -41,23 +42,29 @@ __all__ = [
     "atomic_path",
     "check_output_files",
     "check_output_folder",
-    "checker_image",
+    "error_reason",
     "fit_name",
+    "json_safe",
     "load_mesh",
     "mesh_stem",
     "name_max",
-    "render_uv_layout",
-    "save_atlas",
+    "split_suffix",
     "staged_outputs",
-    "write_obj",
 ]
 
 SUPPORTED_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf", ".gii", ".gii.gz")
+_GII_GZ = ".gii.gz"
 
 
-def _suffix(path: Path) -> str:
-    name = path.name.lower()
-    return ".gii.gz" if name.endswith(".gii.gz") else path.suffix.lower()
+def split_suffix(path: str | os.PathLike) -> tuple[str, str]:
+    """A file name's stem and its mesh suffix, lower-case: ``("lh.pial", ".gii.gz")`` for
+    ``lh.pial.GII.GZ``, ``("scan", ".obj")`` for ``scan.OBJ`` (``.gii.gz`` is the one suffix of
+    two parts). The one place that knows it: reading, output names and batch inputs use it."""
+    name = Path(path).name
+    if name.lower().endswith(_GII_GZ):
+        return name[: -len(_GII_GZ)], _GII_GZ
+    plain = Path(name)
+    return plain.stem, plain.suffix.lower()
 
 
 def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
@@ -85,7 +92,7 @@ def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         raise MeshFileError(f"{path}: no such file")
     if path.is_dir():
         raise MeshFileError(f"{path}: is a directory, not a mesh file")
-    suffix = _suffix(path)
+    suffix = split_suffix(path)[1]
     if suffix not in SUPPORTED_SUFFIXES:
         raise MeshFileError(
             f"{path}: unsupported format {suffix or '(none)'}; "
@@ -99,8 +106,8 @@ def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     if not data:
         raise MeshFileError(f"{path}: file is empty")
     try:
-        if suffix in (".gii", ".gii.gz"):
-            V, F = _load_gifti(data, gz=suffix == ".gii.gz")
+        if suffix in (".gii", _GII_GZ):
+            V, F = _load_gifti(data, gz=suffix == _GII_GZ)
         elif suffix in _READERS:
             V, F = _READERS[suffix](data)
         else:
@@ -310,20 +317,49 @@ def _join_continued(match: re.Match) -> bytes:
     return _OBJ_LINE_BREAK.sub(b" ", run) + b"\n" * run.count(b"\n")
 
 
-def _obj_vertices(text: bytes, lines: np.ndarray) -> np.ndarray:
-    """(n, 3) coordinates of the ``v`` lines (keyword blanked) on file lines ``lines``."""
+def _obj_rows(
+    text: bytes, lines: np.ndarray, dtype, *, element: str, items: str, need: str, number: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The numbers of one kind of OBJ line (keyword blanked) on file lines ``lines``, each line
+    checked to hold at least 3 of them.
+
+    ``element``, ``items``, ``need`` and ``number`` word the errors: "``element`` on line 7 has 2
+    ``items``; ``need``" and "``element`` on line 7 has ``number``: 'x'".
+
+    Returns
+    -------
+    values : (k,) ndarray of ``dtype``
+        Every number, in order.
+    token_line : (k,) int64 ndarray
+        Row (0-based, among these lines) of each number.
+    counts : (rows,) int64 ndarray
+        Numbers per row.
+    """
     token_line, counts = _token_table(text)
     short = np.flatnonzero(counts < 3)
     if len(short):
         i = short[0]
-        raise MeshFileError(
-            f"vertex on line {lines[i]} has {counts[i]} coordinates; a vertex needs x y z"
-        )
-    values = _numbers(text, len(token_line), np.float64)
+        raise MeshFileError(f"{element} on line {lines[i]} has {counts[i]} {items}; {need}")
+    values = _numbers(text, len(token_line), dtype)
     if values is None:
-        row, token = _bad_token(text, _NOT_A_FLOAT)
+        pattern = _NOT_A_FLOAT if np.dtype(dtype).kind == "f" else _NOT_AN_INT
+        row, token = _bad_token(text, pattern)
         where = f" on line {lines[row]}" if row >= 0 else ""
-        raise MeshFileError(f"vertex{where} has a coordinate that is not a number: {token!r}")
+        raise MeshFileError(f"{element}{where} has {number}: {token!r}")
+    return values, token_line, counts
+
+
+def _obj_vertices(text: bytes, lines: np.ndarray) -> np.ndarray:
+    """(n, 3) coordinates of the ``v`` lines (keyword blanked) on file lines ``lines``."""
+    values, _, counts = _obj_rows(
+        text,
+        lines,
+        np.float64,
+        element="vertex",
+        items="coordinates",
+        need="a vertex needs x y z",
+        number="a coordinate that is not a number",
+    )
     if (counts == 3).all():
         return values.reshape(-1, 3)
     first = np.cumsum(counts) - counts
@@ -342,18 +378,15 @@ def _obj_faces(text: bytes, lines: np.ndarray, before: np.ndarray, V: np.ndarray
             line = lines[text.count(b"\n", 0, lone.start())]
             raise MeshFileError(f"face on line {line} has a corner without a vertex index")
         text = re.sub(rb"/[^ \n]*", b"", text)
-    token_line, counts = _token_table(text)
-    few = np.flatnonzero(counts < 3)
-    if len(few):
-        i = few[0]
-        raise MeshFileError(
-            f"face on line {lines[i]} has {counts[i]} corners; a face needs at least 3"
-        )
-    raw = _numbers(text, len(token_line), np.int64)
-    if raw is None:
-        row, token = _bad_token(text, _NOT_AN_INT)
-        where = f" on line {lines[row]}" if row >= 0 else ""
-        raise MeshFileError(f"face{where} has a vertex index that is not a whole number: {token!r}")
+    raw, token_line, counts = _obj_rows(
+        text,
+        lines,
+        np.int64,
+        element="face",
+        items="corners",
+        need="a face needs at least 3",
+        number="a vertex index that is not a whole number",
+    )
     zero = np.flatnonzero(raw == 0)
     if len(zero):
         line = lines[token_line[zero[0]]]
@@ -914,6 +947,21 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         tmp_path.unlink(missing_ok=True)
 
 
+def json_safe(value: Any) -> Any:
+    """``value`` with what JSON cannot hold replaced: inf and nan become None, numpy scalars
+    Python ones (dicts, lists and tuples are walked; tuples become lists). Used for the atlas
+    report and the batch summaries."""
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
 # ---------------------------------------------------------------------------------------------
 # Where the outputs go: checked before any work, so that a run never fails at the end for it
 
@@ -940,9 +988,7 @@ def _clip(name: str, limit: int) -> str:
 
 def mesh_stem(path: str | os.PathLike) -> str:
     """A mesh file's name without its suffix (``lh.pial.gii.gz`` -> ``lh.pial``), or ``mesh``."""
-    name = Path(path).name
-    stem = name[: -len(".gii.gz")] if name.lower().endswith(".gii.gz") else Path(name).stem
-    return stem or "mesh"
+    return split_suffix(path)[0] or "mesh"
 
 
 def _existing(path: Path) -> Path:
@@ -991,7 +1037,7 @@ def atlas_stem(stem: str, outdir: str | os.PathLike) -> str:
 
 
 def atlas_file_names(stem: str) -> dict[str, str]:
-    """The files :func:`save_atlas` writes into its folder, by role."""
+    """The files :func:`segparam.export.save_atlas` writes into its folder, by role."""
     return {
         "obj": f"{stem}.obj",
         "mtl": f"{stem}.mtl",
@@ -1002,8 +1048,12 @@ def atlas_file_names(stem: str) -> dict[str, str]:
     }
 
 
-def _reason(exc: OSError) -> str:
-    return exc.strerror or str(exc) or type(exc).__name__
+def error_reason(exc: BaseException) -> str:
+    """A short reason for a failed file operation: an OSError's text (``No space left on
+    device``), else the exception's type name."""
+    if isinstance(exc, OSError):
+        return exc.strerror or str(exc) or type(exc).__name__
+    return type(exc).__name__
 
 
 def check_output_folder(
@@ -1049,7 +1099,7 @@ def check_output_folder(
         os.rmdir(tempfile.mkdtemp(prefix=".segparam-check-", dir=base))
     except OSError as exc:
         where = "" if base == Path(os.path.abspath(folder)) else f" (in {base})"
-        raise MeshFileError(f"{folder}: cannot write there{where}: {_reason(exc)}") from None
+        raise MeshFileError(f"{folder}: cannot write there{where}: {error_reason(exc)}") from None
     sources = [Path(p) for p in inputs]
     for name in names:
         target = folder / name
@@ -1085,442 +1135,6 @@ def check_output_files(
     for folder, names in folders.items():
         check_output_folder(folder, names, inputs=inputs)
     return paths
-
-
-# 17 significant digits write every float64 so that it reads back bit for bit (9 digits moved a
-# 3-unit object 1e7 from the origin by 0.05); uvs too, so that no reloaded sliver flips.
-_FLOAT_FORMAT = "%.17g"
-# Rows formatted by one ``%`` call: bounds the tuple of Python numbers it needs.
-_ROW_CHUNK = 65536
-
-
-def write_obj(
-    path: str | os.PathLike,
-    V: np.ndarray,
-    F: np.ndarray,
-    *,
-    uv: np.ndarray | None = None,
-    uv_faces: np.ndarray | None = None,
-    mtl: str | None = None,
-    material: str = "atlas",
-) -> None:
-    """Write an OBJ with optional texture coordinates (``vt``) and a material library.
-
-    Coordinates are written with 17 significant digits: :func:`load_mesh` reads back the same
-    float64 values bit for bit.
-
-    Parameters
-    ----------
-    V : (n, 3) float ndarray
-    F : (m, 3) int ndarray
-    uv : (k, 2) float ndarray, optional
-        Texture coordinates; with ``uv_faces`` they may be split along seams.
-    uv_faces : (m, 3) int ndarray, optional
-        Rows of ``uv`` per face corner; default ``F`` (one uv per vertex).
-    mtl : str, optional
-        Name of an MTL file to reference (``mtllib``), with ``usemtl material``.
-    """
-    F = np.asarray(F)
-    head = "# written by segparam\n" + (f"mtllib {mtl}\n" if mtl else "")
-    body = [head.encode(), _rows("v", V, _FLOAT_FORMAT)]
-    if uv is not None:
-        body.append(_rows("vt", uv, _FLOAT_FORMAT))
-        T = F if uv_faces is None else np.asarray(uv_faces)
-        corners = np.stack([F + 1, T + 1], axis=2).reshape(len(F), 6)
-        faces = _rows("f", corners, "%d", sep=("/", " "))
-    else:
-        faces = _rows("f", F + 1, "%d")
-    if mtl:
-        body.append(f"usemtl {material}\n".encode())
-    body.append(faces)
-    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        fh.writelines(body)
-
-
-def _rows(tag: str, A: np.ndarray, fmt: str, sep: tuple[str, str] | None = None) -> bytes:
-    """A 2-D array as OBJ lines ``tag a b c`` (ASCII), each number formatted with ``fmt``.
-
-    The text is what ``np.savetxt(A, fmt=f"{tag} {row}")`` writes. Whole numbers that are not
-    negative are laid out digit by digit with numpy (:func:`_index_text`); other numbers go
-    through one ``%`` formatting call per block of rows, not one per row.
-    """
-    A = np.asarray(A)
-    if A.size == 0:
-        return b""
-    k = A.shape[1]
-    if sep is None:
-        seps = [" "] * (k - 1)
-    else:  # pairs joined by sep[0], pairs separated by sep[1]: "f 1/1 2/2 3/3"
-        seps = [sep[i % 2] for i in range(k - 1)]
-    if fmt == "%d" and A.dtype.kind in "iu" and A.min() >= 0:
-        return _index_text(f"{tag} ", A, "".join(seps) + "\n")
-    line = f"{tag} " + "".join(fmt + s for s in [*seps, "\n"])
-    parts = []
-    for start in range(0, len(A), _ROW_CHUNK):
-        block = A[start : start + _ROW_CHUNK]
-        parts.append((line * len(block)) % tuple(block.ravel().tolist()))
-    return "".join(parts).encode("ascii")
-
-
-def _index_text(prefix: str, A: np.ndarray, seps: str) -> bytes:
-    """Rows ``prefix a0 s0 a1 s1 ... a(k-1) s(k-1)`` of non-negative integers ``A`` (r, k), in
-    decimal; ``seps`` holds one ASCII character per column (the last one ends the line).
-
-    Every number is first written with as many digits as the largest one, into a byte table of
-    fixed-width rows; then its leading zeros (and nothing else) are dropped in one pass. numpy
-    loops over digit positions, never over rows; blocks of rows bound the memory.
-    """
-    r, k = A.shape
-    top = int(A.max())
-    D = len(str(top))  # digits of the largest number
-    dtype = np.uint32 if top < 2**32 else np.uint64  # division is faster on narrow integers
-    head = len(prefix)
-    width = head + k * (D + 1)
-    parts = []
-    for start in range(0, r, _ROW_CHUNK):
-        B = A[start : start + _ROW_CHUNK].astype(dtype)
-        n = len(B)
-        text = np.empty((n, width), dtype=np.uint8)
-        keep = np.ones((n, width), dtype=bool)
-        text[:, :head] = np.frombuffer(prefix.encode("ascii"), np.uint8)
-        cells = text[:, head:].reshape(n, k, D + 1)  # D digits and the separator per number
-        cells[:, :, D] = np.frombuffer(seps.encode("ascii"), np.uint8)
-        q = B
-        for j in range(D - 1, -1, -1):  # loop over digit positions, lowest first
-            q, digit = np.divmod(q, dtype(10))
-            np.add(digit, ord("0"), out=cells[:, :, j], casting="unsafe")
-        leading = keep[:, head:].reshape(n, k, D + 1)
-        for j in range(D - 1):  # digit j is a leading zero when the number is below 10**(D-1-j)
-            np.greater_equal(B, dtype(10 ** (D - 1 - j)), out=leading[:, :, j])
-        parts.append(text[keep].tobytes())
-    return b"".join(parts)
-
-
-def _palette(k: int) -> np.ndarray:
-    """``k`` distinct, reproducible light colours (golden-ratio hues), uint8 (k, 3)."""
-    import colorsys
-
-    hues = (np.arange(k) * 0.618033988749895) % 1.0
-    return np.array([colorsys.hsv_to_rgb(h, 0.45, 0.95) for h in hues]) * 255  # loop over charts
-
-
-def render_uv_layout(
-    uv: np.ndarray,
-    F: np.ndarray,
-    *,
-    labels: np.ndarray | None = None,
-    size: int = 1024,
-    outline: bool = True,
-):
-    """Picture of a uv layout in the unit square: charts filled in distinct colours, outlined.
-
-    Triangles are rasterized chart by chart with the packer's conservative rasterizer (no
-    per-triangle drawing calls); each chart's boundary loops are drawn as polylines.
-
-    Parameters
-    ----------
-    uv : (k, 2) float ndarray
-        Coordinates in ``[0, 1]^2``.
-    F : (m, 3) int ndarray
-        Triangles into ``uv``.
-    labels : (m,) int ndarray, optional
-        Chart of each face (default: one chart).
-
-    Returns
-    -------
-    PIL.Image.Image
-    """
-    from PIL import Image, ImageDraw
-
-    from .mesh import boundary_loops
-    from .raster import rasterize_footprint
-
-    labels = np.zeros(len(F), dtype=np.int64) if labels is None else np.asarray(labels)
-    n = int(labels.max()) + 1
-    # colour of each chart's number + 1; 0 (no chart) is white
-    lut = np.vstack([[255, 255, 255], _palette(n)]).astype(np.uint8)
-    chart = np.zeros((size, size), dtype=np.uint8 if n < 255 else np.int64)
-    order = np.argsort(labels, kind="stable")
-    bounds = np.searchsorted(labels[order], np.arange(n + 1))
-    groups = [order[bounds[k] : bounds[k + 1]] for k in range(n)]
-    P = np.asarray(uv, dtype=np.float64) * size
-    for k, faces in enumerate(groups):  # loop over charts
-        if len(faces) == 0:
-            continue
-        mask = rasterize_footprint(uv, F[faces], resolution=size, eps=0.0)
-        box = _texel_box(P[F[faces].ravel()], size)  # the chart's texels all lie in this box
-        np.copyto(chart[box], k + 1, where=mask[box])
-    image = Image.fromarray(lut.take(chart[::-1], axis=0))  # row 0 is v = 0: flip, v grows up
-    if outline:
-        draw = ImageDraw.Draw(image)
-        P = uv * size
-        P[:, 1] = size - P[:, 1]
-        for faces in groups:  # loop over charts, then over their few boundary loops
-            for loop in boundary_loops(F[faces]):
-                pts = P[np.r_[loop, loop[:1]]]
-                draw.line(list(map(tuple, pts.tolist())), fill=(40, 40, 40), width=1)
-    return image
-
-
-def _texel_box(Q: np.ndarray, size: int) -> tuple[slice, slice]:
-    """Rows and columns of a ``size`` grid that hold every texel a conservative rasterization of
-    points ``Q`` (texel units) can touch: their bounding box and one texel around it."""
-    lo, hi = Q.min(axis=0), Q.max(axis=0)
-    if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
-        return slice(0, size), slice(0, size)
-    c0, r0 = np.clip(np.floor(lo) - 1, 0, size).astype(np.int64)
-    c1, r1 = np.clip(np.floor(hi) + 2, 0, size).astype(np.int64)
-    return slice(int(r0), int(r1)), slice(int(c0), int(c1))
-
-
-def checker_image(size: int = 1024, squares: int = 16):
-    """A checkerboard texture with a colour ramp (so flips and rotations show), PIL image."""
-    from PIL import Image
-
-    return Image.fromarray(_checker_pixels(size, squares))
-
-
-def _checker_pixels(size: int, squares: int) -> np.ndarray:
-    """The pixels of :func:`checker_image`, (size, size, 3) uint8.
-
-    Red ramps along the columns, green down the rows, blue is constant, and dark squares take
-    35% of each: every channel is a lookup by row or by column, broadcast over the image.
-    """
-    a = np.arange(size)
-    cell = size // squares
-    parity = (a // cell) % 2 == 1
-    dark = parity[:, None] != parity[None, :]  # (i // cell + j // cell) is odd
-    red = (80 + 150 * a / size).astype(np.uint8)  # by column
-    green = (80 + 150 * (1 - a / size)).astype(np.uint8)  # by row
-    blue = np.full(1, 200, dtype=np.uint8)
-    img = np.empty((size, size, 3), dtype=np.uint8)
-    img[..., 0] = np.where(dark, (red * 0.35).astype(np.uint8), red)
-    img[..., 1] = np.where(dark, (green * 0.35).astype(np.uint8)[:, None], green[:, None])
-    img[..., 2] = np.where(dark, (blue * 0.35).astype(np.uint8), blue)
-    return img
-
-
-@functools.lru_cache(maxsize=4)
-def _checker_png(size: int = 1024, squares: int = 16) -> bytes:
-    """:func:`checker_image` as PNG bytes, made once per size (the atlas writes it twice: the
-    ``_checker.png`` file and the texture inside the GLB)."""
-    return _png_bytes(_checker_pixels(size, squares))
-
-
-def _png_bytes(pixels: np.ndarray) -> bytes:
-    """A PNG file of an (h, w, 3) uint8 RGB image (Pillow, its default compression: the 1024 x
-    1024 checker in 16 ms and 10 KB; a zlib-level-1 encoder of our own took 5 ms for 30 KB)."""
-    import io as _io
-
-    from PIL import Image
-
-    pixels = np.asarray(pixels)
-    if pixels.dtype != np.uint8 or pixels.ndim != 3 or pixels.shape[2] != 3:
-        raise ValueError(f"expected an (h, w, 3) uint8 image, got {pixels.dtype} {pixels.shape}")
-    buf = _io.BytesIO()
-    Image.fromarray(pixels, mode="RGB").save(buf, format="PNG")
-    return buf.getvalue()
-
-
-def save_atlas(atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: int | None = None):
-    """Write an atlas into ``outdir``: ``<stem>.obj/.mtl/_checker.png``, ``<stem>.glb``,
-    ``<stem>_uv.png`` and ``report.json``.
-
-    The folder is checked first (:func:`check_output_folder`); a stem too long for the file
-    system is shortened (:func:`atlas_stem`). Every file is then written into a staging folder
-    inside ``outdir`` and moved into place only when all of them were written, all or nothing
-    (:func:`staged_outputs`): a failure leaves no partial output, and a rerun into the folder of
-    an earlier atlas that fails or is interrupted (Ctrl-C) leaves the earlier files exactly.
-
-    Returns
-    -------
-    list of Path
-        The files written.
-
-    Raises
-    ------
-    MeshFileError
-        The folder cannot take the files (see :func:`check_output_folder`), or writing failed
-        (disk full, ...); one line naming the folder, never a bare OSError.
-    """
-    import json
-
-    outdir = Path(outdir)
-    stem = str(stem)
-    if not stem or stem in (".", "..") or "/" in stem or os.sep in stem:
-        raise MeshFileError(f"stem {stem!r} is not a file name")
-    stem = atlas_stem(stem, outdir)
-    names = atlas_file_names(stem)
-    check_output_folder(outdir, names.values())
-    size = size or atlas.packing.resolution
-    try:
-        with staged_outputs(outdir) as stage:
-            checker = _checker_png(1024)
-            (stage / names["checker"]).write_bytes(checker)
-            (stage / names["mtl"]).write_text(
-                f"# written by segparam\nnewmtl atlas\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\n"
-                f"map_Kd {names['checker']}\n",
-                encoding="utf-8",
-            )
-            write_obj(
-                stage / names["obj"],
-                atlas.V,
-                atlas.F,
-                uv=atlas.uv,
-                uv_faces=atlas.uv_F,
-                mtl=names["mtl"],
-            )
-            (stage / names["glb"]).write_bytes(
-                _glb_bytes(atlas.V[atlas.uv_vertex], atlas.uv_F, atlas.uv, checker)
-            )
-            layout = render_uv_layout(atlas.uv, atlas.uv_F, labels=atlas.chart_of_face, size=size)
-            layout.save(stage / names["uv"], format="PNG")
-            (stage / names["report"]).write_text(
-                json.dumps(atlas.report(), indent=1, sort_keys=False) + "\n", encoding="utf-8"
-            )
-    except MeshFileError:
-        raise
-    except OSError as exc:
-        raise MeshFileError(f"{outdir}: cannot write the atlas files: {_reason(exc)}") from None
-    return [outdir / name for name in names.values()]
-
-
-# glTF stores positions as float32 (24-bit mantissa). Up to this many times its size from the
-# origin an object keeps them to 8 * 2**-24 < 1e-6 of its size; farther away, positions are stored
-# relative to the bounding-box centre and the centre becomes the node's float64 translation.
-_GLB_MAX_OFFSET = 8.0
-
-# glTF 2.0 numbers (https://registry.khronos.org/glTF/specs/2.0/glTF-2.0.html)
-_GL_UNSIGNED_INT, _GL_FLOAT = 5125, 5126
-_GL_ARRAY_BUFFER, _GL_ELEMENT_ARRAY_BUFFER = 34962, 34963
-_GL_TRIANGLES = 4
-_GL_LINEAR, _GL_LINEAR_MIPMAP_LINEAR, _GL_REPEAT = 9729, 9987, 10497
-
-# The GLB's material shows the texture as the MTL does (Kd 1 1 1, Ks 0): base colour white
-# times the texture, not metallic, fully rough (no highlight). (trimesh's export, used before,
-# darkened it to a 0.4 grey and left it metallic.)
-_GLB_MATERIAL = {
-    "pbrMetallicRoughness": {
-        "baseColorTexture": {"index": 0},
-        "baseColorFactor": [1.0, 1.0, 1.0, 1.0],
-        "metallicFactor": 0.0,
-        "roughnessFactor": 1.0,
-    }
-}
-
-
-def _glb_bytes(V: np.ndarray, F: np.ndarray, uv: np.ndarray, png: bytes) -> bytes:
-    """A binary glTF 2.0 of a textured triangle mesh that keeps float64 placement.
-
-    One scene, one node, one mesh with one triangle primitive: ``POSITION`` (float32),
-    ``TEXCOORD_0`` (float32, ``v`` flipped: glTF's uv origin is the top-left corner) and uint32
-    indices, and a material whose base colour is the PNG ``png``, embedded. An object far from
-    the origin (1e7 away, say) would lose up to half a unit to float32 positions: its positions
-    are written relative to its bounding-box centre and the node carries the centre as its
-    ``translation``, which glTF keeps as a JSON (double) number. The same input gives the same
-    bytes.
-
-    Parameters
-    ----------
-    V : (n, 3) float ndarray
-        One position per uv vertex.
-    F : (m, 3) int ndarray
-        Triangles into ``V`` and ``uv``.
-    uv : (n, 2) float ndarray
-        Texture coordinates, origin bottom-left (as in OBJ).
-    png : bytes
-        The texture, a PNG file.
-    """
-    import json
-
-    from . import __version__
-
-    V = np.asarray(V, dtype=np.float64)
-    uv = np.asarray(uv, dtype=np.float64)
-    if len(uv) != len(V):
-        raise ValueError(f"{len(V)} positions but {len(uv)} texture coordinates")
-    node: dict = {"mesh": 0}
-    lo, hi = V.min(axis=0), V.max(axis=0)
-    size = float((hi - lo).max())
-    if np.abs(V).max() > _GLB_MAX_OFFSET * size:
-        centre = (lo + hi) / 2
-        V = V - centre
-        node["translation"] = centre.tolist()
-    positions = V.astype("<f4")
-    texcoords = np.empty((len(uv), 2), dtype="<f4")
-    texcoords[:, 0] = uv[:, 0]
-    texcoords[:, 1] = 1.0 - uv[:, 1]
-    indices = np.asarray(F).astype("<u4")
-    blobs = [indices.tobytes(), positions.tobytes(), texcoords.tobytes(), png]
-    targets = [_GL_ELEMENT_ARRAY_BUFFER, _GL_ARRAY_BUFFER, _GL_ARRAY_BUFFER, None]
-    views, offset = [], 0
-    for blob, target in zip(blobs, targets, strict=True):
-        view = {"buffer": 0, "byteOffset": offset, "byteLength": len(blob)}
-        views.append(view if target is None else {**view, "target": target})
-        offset += len(blob)  # a multiple of 4 up to the image: 4-byte indices, 12-, 8-byte vertices
-    binary = _pad(b"".join(blobs), b"\0")
-    gltf = {
-        "asset": {"version": "2.0", "generator": f"segparam {__version__}"},
-        "scene": 0,
-        "scenes": [{"nodes": [0]}],
-        "nodes": [node],
-        "meshes": [
-            {
-                "primitives": [
-                    {
-                        "attributes": {"POSITION": 1, "TEXCOORD_0": 2},
-                        "indices": 0,
-                        "material": 0,
-                        "mode": _GL_TRIANGLES,
-                    }
-                ]
-            }
-        ],
-        "accessors": [
-            _accessor(0, _GL_UNSIGNED_INT, indices.size, "SCALAR"),
-            _accessor(
-                1,
-                _GL_FLOAT,
-                len(positions),
-                "VEC3",
-                min=positions.min(axis=0).tolist(),  # required for POSITION
-                max=positions.max(axis=0).tolist(),
-            ),
-            _accessor(2, _GL_FLOAT, len(texcoords), "VEC2"),
-        ],
-        "materials": [_GLB_MATERIAL],
-        "textures": [{"sampler": 0, "source": 0}],
-        "samplers": [
-            {
-                "magFilter": _GL_LINEAR,
-                "minFilter": _GL_LINEAR_MIPMAP_LINEAR,
-                "wrapS": _GL_REPEAT,
-                "wrapT": _GL_REPEAT,
-            }
-        ],
-        "images": [{"bufferView": 3, "mimeType": "image/png"}],
-        "bufferViews": views,
-        "buffers": [{"byteLength": len(binary)}],
-    }
-    content = _pad(json.dumps(gltf, separators=(",", ":")).encode("ascii"), b" ")
-    return b"".join(
-        [
-            struct.pack("<4sII", b"glTF", 2, 12 + 8 + len(content) + 8 + len(binary)),
-            struct.pack("<I4s", len(content), b"JSON"),
-            content,
-            struct.pack("<I4s", len(binary), b"BIN\0"),
-            binary,
-        ]
-    )
-
-
-def _accessor(view: int, component: int, count: int, kind: str, **bounds) -> dict:
-    return {"bufferView": view, "componentType": component, "count": count, "type": kind, **bounds}
-
-
-def _pad(data: bytes, fill: bytes) -> bytes:
-    """``data`` followed by ``fill`` bytes up to a multiple of 4 (glTF chunks are 4-aligned)."""
-    return data + fill * (-len(data) % 4)
 
 
 @contextlib.contextmanager
@@ -1613,7 +1227,7 @@ def staged_outputs(outdir: str | os.PathLike) -> Iterator[Path]:
                 keep = bool(failed)  # then the previous files stay where they are
             if failed:
                 raise MeshFileError(
-                    f"{outdir}: moving the new files in failed ({_reason_of(exc)}), and so did "
+                    f"{outdir}: moving the new files in failed ({error_reason(exc)}), and so did "
                     f"putting back {', '.join(failed)}; the previous files are kept in {backup}"
                 ) from exc
             raise
@@ -1621,9 +1235,3 @@ def staged_outputs(outdir: str | os.PathLike) -> Iterator[Path]:
         if not keep:
             with _ctrl_c_deferred():
                 shutil.rmtree(stage, ignore_errors=True)
-
-
-def _reason_of(exc: BaseException) -> str:
-    if isinstance(exc, OSError):
-        return _reason(exc)
-    return type(exc).__name__

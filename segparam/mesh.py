@@ -32,12 +32,15 @@ __all__ = [
     "face_neighbors",
     "face_normals",
     "genus",
+    "group_by_label",
     "is_disk",
     "is_edge_manifold",
     "is_vertex_manifold",
     "label_topology",
     "mesh_arrays",
     "disk_labels",
+    "plane_basis",
+    "submesh",
     "vertex_adjacency",
     "vertex_normals",
     "vertex_rings",
@@ -215,6 +218,64 @@ def unit_frame(V: np.ndarray) -> tuple[np.ndarray, float]:
     lo, hi = V.min(axis=0), V.max(axis=0)
     size = float(np.max(hi / 2 - lo / 2)) * 2  # halves first: no overflow near float64's limit
     return lo / 2 + hi / 2, size if size > 0 else 1.0
+
+
+def plane_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """An orthonormal basis ``b1, b2`` of the plane orthogonal to each unit ``normal``.
+
+    ``b1 = normal x h / |normal x h|`` with ``h`` the x axis, or the y axis where the normal is
+    within about 25 degrees of x (``|n_x| >= 0.9``), so that the cross product never vanishes;
+    ``b2 = normal x b1``. ``(b1, b2, normal)`` is right-handed: coordinates ``(x . b1, x . b2)``
+    keep the winding of triangles seen from the normal's side.
+
+    Parameters
+    ----------
+    normal : (n, 3) float64 ndarray
+        Unit normals (tangent planes of the solver, the plane of a projected chart).
+
+    Returns
+    -------
+    b1, b2 : (n, 3) float64 ndarray
+    """
+    helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+    b1 = np.cross(normal, helper)
+    b1 /= np.linalg.norm(b1, axis=1, keepdims=True)
+    return b1, np.cross(normal, b1)
+
+
+def submesh(F: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The faces ``faces`` of ``F`` as a mesh of their own.
+
+    Returns
+    -------
+    vertices : (k,) int64 ndarray
+        The vertices the faces use, ascending: ``V[vertices]`` are the submesh's positions.
+    local_F : (len(faces), 3) int64 ndarray
+        The faces in indices of ``vertices``, in the order of ``faces``.
+    """
+    vertices, local = np.unique(F[faces].ravel(), return_inverse=True)
+    return vertices.astype(np.int64), local.reshape(-1, 3).astype(np.int64)
+
+
+def group_by_label(labels: np.ndarray, n_labels: int) -> tuple[np.ndarray, np.ndarray]:
+    """Items grouped by label: those of label ``k`` are ``order[bounds[k] : bounds[k + 1]]``.
+
+    One stable sort, so each group lists its items in increasing index (the faces of a chart in
+    mesh order); labels without items get an empty group.
+
+    Parameters
+    ----------
+    labels : (m,) int ndarray
+        Values in ``[0, n_labels)`` (a chart per face).
+    n_labels : int
+
+    Returns
+    -------
+    order : (m,) int64 ndarray
+    bounds : (n_labels + 1,) int64 ndarray
+    """
+    order = np.argsort(labels, kind="stable")
+    return order, np.searchsorted(labels[order], np.arange(n_labels + 1))
 
 
 def corner_angles(V: np.ndarray, F: np.ndarray) -> np.ndarray:

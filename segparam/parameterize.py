@@ -1,7 +1,7 @@
 """The chart solver: Hessian eigenfunctions for triangular mesh parameterization.
 
-This module follows the paper ("Hessian Eigenfunctions for Triangular Mesh Parameterization",
-in ``shared/paper/``), a variant of Hessian LLE (Donoho & Grimes 2003), section by section:
+This module follows the paper ("Hessian Eigenfunctions for Triangular Mesh Parameterization"),
+a variant of Hessian LLE (Donoho & Grimes 2003), section by section:
 
 * 3.1 tangent plane at every vertex from the average of its adjacent triangle normals, and local
   coordinates ``(u, v)`` of its neighbourhood ``N_i`` in that plane (:func:`neighbourhoods`,
@@ -48,6 +48,7 @@ from .mesh import (
     is_edge_manifold,
     is_vertex_manifold,
     mesh_arrays,
+    plane_basis,
     vertex_adjacency,
     vertex_normals,
 )
@@ -199,7 +200,7 @@ def neighbourhoods(
     A vertex whose closed 1-ring has fewer than ``min_points`` points (a boundary vertex) gets the
     nearest vertices of its next ring(s), just enough to reach ``min_points``, plus ``extra[i]``
     more. Growing every neighbourhood to the 2-ring smooths the Hessian and loses bijectivity on
-    folded charts (see ``DESIGN.md``), so the extension is strictly local.
+    folded charts, so the extension is strictly local.
 
     Parameters
     ----------
@@ -396,11 +397,7 @@ def tangent_frames(
             normal[flat] = _pca_normals(V, ptr, idx)[flat]
     else:  # "pca"
         normal = _pca_normals(V, ptr, idx)
-    helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
-    b1 = np.cross(normal, helper)
-    b1 /= np.linalg.norm(b1, axis=1, keepdims=True)
-    b2 = np.cross(normal, b1)
-    return b1, b2
+    return plane_basis(normal)
 
 
 # ---------------------------------------------------------------------------------------------

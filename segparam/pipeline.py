@@ -254,9 +254,9 @@ class Atlas:
         written are returned. A folder that cannot take the files (read-only, a file in the
         way, disk full...) raises :class:`~segparam.errors.MeshFileError` (a
         :class:`~segparam.errors.SegparamError` and an ``OSError``) with one line, and leaves no
-        file (see :func:`segparam.io.save_atlas`).
+        file (see :func:`segparam.export.save_atlas`).
         """
-        from .io import save_atlas
+        from .export import save_atlas
 
         return save_atlas(self, outdir, stem=stem, **kwargs)
 
@@ -278,19 +278,6 @@ def _versions() -> dict[str, str]:
         except md.PackageNotFoundError:  # pragma: no cover
             out[name] = "missing"
     return out
-
-
-def _clean_json(value: Any) -> Any:
-    """Floats that JSON cannot hold (inf, nan) become None; numpy scalars become Python ones."""
-    if isinstance(value, dict):
-        return {k: _clean_json(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean_json(v) for v in value]
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
-    return value
 
 
 def build_report(atlas: Atlas) -> dict[str, Any]:
@@ -362,7 +349,9 @@ def build_report(atlas: Atlas) -> dict[str, Any]:
         },
         "charts": charts,
     }
-    return _clean_json(report)
+    from .io import json_safe
+
+    return json_safe(report)
 
 
 def build_atlas(

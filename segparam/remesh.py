@@ -1,4 +1,4 @@
-"""Stage 2: isotropic remeshing, only where it helps the chart solver.
+"""Isotropic remeshing, only where it helps the chart solver.
 
 The Hessian solver (:mod:`segparam.parameterize`) fits a quadratic on every vertex's 1-ring, so it
 needs well-shaped triangles: on slivers it folds. Remeshing is not free, though: on charts that are

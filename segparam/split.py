@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import logging
 import os
 import signal
@@ -41,9 +42,12 @@ from .mesh import (
     check_mesh,
     face_areas,
     face_normals,
+    group_by_label,
     is_disk,
     label_topology,
     mesh_arrays,
+    plane_basis,
+    submesh,
     unit_frame,
     vertex_adjacency,
 )
@@ -182,11 +186,6 @@ class ChartSet:
     first_pass_bijective: np.ndarray
 
 
-def _submesh(F: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    vertices, local = np.unique(F[faces].ravel(), return_inverse=True)
-    return vertices.astype(np.int64), local.reshape(-1, 3).astype(np.int64)
-
-
 def project_chart(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """Orthogonal projection onto the least-squares plane, oriented to keep the winding.
 
@@ -201,10 +200,7 @@ def project_chart(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     if np.linalg.norm(n) < 1e-300:
         n = np.linalg.svd(V - V.mean(axis=0), full_matrices=False)[2][-1]
     n = n / np.linalg.norm(n)
-    helper = np.array([1.0, 0, 0]) if abs(n[0]) < 0.9 else np.array([0, 1.0, 0])
-    b1 = np.cross(n, helper)
-    b1 /= np.linalg.norm(b1)
-    b2 = np.cross(n, b1)
+    (b1,), (b2,) = plane_basis(n[None])
     X = V - V.mean(axis=0)
     return np.stack([X @ b1, X @ b2], axis=1)
 
@@ -276,8 +272,7 @@ def parameterize_charts(
     center, size = unit_frame(V)
     V = (V - center) / size  # scale-free; chart uvs are scaled back below
     n_src = int(labels.max()) + 1
-    order = np.argsort(labels, kind="stable")
-    bounds = np.searchsorted(labels[order], np.arange(n_src + 1))
+    order, bounds = group_by_label(labels, n_src)
     sources = [order[bounds[s] : bounds[s + 1]] for s in range(n_src)]
     sub = _submeshes(F, labels, order, bounds)
     # Small charts, all at once: already in mesh indices and units.
@@ -289,16 +284,16 @@ def parameterize_charts(
     rest = np.flatnonzero(~in_bulk).tolist()  # the charts that need the solver alone
     jobs = cfg.n_jobs or os.cpu_count() or 1
     parallel = jobs > 1 and len(rest) > 1 and len(F) >= PARALLEL_MIN_FACES
-    # The crease-aware face affinity splits failing charts. It is normalized over the whole mesh,
-    # so it is built here once (lazily when serial) and each chart gets its restriction: the
-    # result does not depend on n_jobs.
-    W = face_affinity(V, F) if parallel else None
+    affinity = _MeshAffinity(V, F)
 
     def task(src: int) -> tuple:
+        """The arguments of :func:`_solve_source` for chart ``src`` (before ``cfg, seed``).
+
+        A worker process cannot reach the mesh: it gets the chart's affinity at once.
+        """
         faces = sources[src]
         vertices, local_F = sub.of(src)
-        W_src = None if W is None else W[faces][:, faces]
-        return V[vertices], local_F, W_src, src
+        return V[vertices], local_F, affinity.of_chart(faces, now=parallel), src
 
     results: dict[int, tuple[list[Chart], bool]] = {}
     if parallel:
@@ -323,19 +318,8 @@ def parameterize_charts(
             raise
         pool.shutdown()
     else:
-        cache: list[sp.csr_matrix] = []
-
-        def affinity_of(src: int):  # built on the first chart that must be split
-            def restricted() -> sp.csr_matrix:
-                if not cache:
-                    cache.append(face_affinity(V, F))
-                return cache[0][sources[src]][:, sources[src]]
-
-            return restricted
-
         for done, src in enumerate(rest, len(final) + 1):  # loop over the charts left
-            Vs, Fs, _, _ = task(src)
-            results[src] = _solve_source(Vs, Fs, affinity_of(src), src, cfg, seed)
+            results[src] = _solve_source(*task(src), cfg, seed)
             if progress is not None:
                 progress(done)
 
@@ -368,7 +352,7 @@ class _Submeshes:
 
     Chart ``s`` has the mesh vertices ``vertices[vptr[s] : vptr[s + 1]]`` (ascending) and the
     faces ``local_F[bounds[s] : bounds[s + 1]]`` in those local indices, in the order of
-    ``order`` (the faces sorted by chart): what ``_submesh(F, faces)`` gives chart by chart.
+    ``order`` (the faces sorted by chart): what :func:`segparam.mesh.submesh` gives chart by chart.
     """
 
     vertices: np.ndarray
@@ -432,10 +416,7 @@ def _project_union(V: np.ndarray, F: np.ndarray, vert_chart: np.ndarray, n_chart
     length = np.linalg.norm(n, axis=1)
     ok = length >= 1e-300
     n = n / np.where(ok, length, 1.0)[:, None]
-    helper = np.where((np.abs(n[:, 0]) < 0.9)[:, None], [[1.0, 0, 0]], [[0, 1.0, 0]])
-    b1 = np.cross(n, helper)
-    b1 /= np.linalg.norm(b1, axis=1, keepdims=True)
-    b2 = np.cross(n, b1)
+    b1, b2 = plane_basis(n)
     count = np.bincount(vert_chart, minlength=n_charts)
     mean = np.stack([np.bincount(vert_chart, V[:, j], minlength=n_charts) for j in range(3)], 1)
     X = V - (mean / np.maximum(count, 1)[:, None])[vert_chart]
@@ -562,23 +543,55 @@ def _bulk_charts(
     return out
 
 
+class _MeshAffinity:
+    """The crease-aware face affinity (:func:`segment.face_affinity`) that splits failing charts.
+
+    It is normalized over the whole mesh, so it is built once for the mesh, on first use (most
+    runs split no chart), and every chart gets its restriction: a split does not depend on
+    ``n_jobs``.
+    """
+
+    def __init__(self, V: np.ndarray, F: np.ndarray) -> None:
+        self._V, self._F = V, F
+        self._W: sp.csr_matrix | None = None
+
+    def restricted(self, faces: np.ndarray) -> sp.csr_matrix:
+        """The affinity among ``faces`` (mesh face indices), in their order."""
+        if self._W is None:
+            self._W = face_affinity(self._V, self._F)
+        return self._W[faces][:, faces]
+
+    def of_chart(self, faces: np.ndarray, *, now: bool) -> Callable[[], sp.csr_matrix]:
+        """What :func:`_solve_source` calls for a chart's affinity when it must split the chart:
+        restricted when called (``now=False``), or already restricted (``now=True``, for a
+        worker process, which cannot reach the mesh)."""
+        if now:
+            return functools.partial(_given, self.restricted(faces))
+        return functools.partial(self.restricted, faces)
+
+
+def _given(W: sp.csr_matrix) -> sp.csr_matrix:
+    return W
+
+
 def _solve_source(
     V: np.ndarray,
     F: np.ndarray,
-    W: sp.csr_matrix | Callable[[], sp.csr_matrix],
+    affinity: Callable[[], sp.csr_matrix],
     src: int,
     cfg: SplitConfig,
     seed: int,
 ) -> tuple[list[Chart], bool]:
     """Map one segmentation chart, bisecting the pieces that fail (the per-chart task).
 
-    ``V, F`` are the chart's own vertices and faces; ``W`` its face affinity, or a function that
-    builds it (called only if the chart must be split). Returns the bijective pieces, in
-    chart-local indices, and whether the first try succeeded.
+    ``V, F`` are the chart's own vertices and faces; ``affinity()`` gives its face affinity
+    (:meth:`_MeshAffinity.of_chart`; called only if the chart must be split). Returns the
+    bijective pieces, in chart-local indices, and whether the first try succeeded.
     """
     stack = [(np.arange(len(F)), 0)]
     pieces: list[Chart] = []
     first = False
+    W = None
     while stack:
         faces, depth = stack.pop()
         chart = _try_piece(V, F, faces, src, depth, cfg, seed)
@@ -587,8 +600,8 @@ def _solve_source(
         if chart is not None:
             pieces.append(chart)
             continue
-        if callable(W):
-            W = W()
+        if W is None:
+            W = affinity()
         parts = divide(W, faces, seed=seed)
         stack.extend((p, depth + 1) for p in reversed(parts) if len(p))
     return pieces, first
@@ -604,7 +617,7 @@ def _try_piece(
     seed: int,
 ) -> Chart | None:
     """A bijective chart for these faces, or None if the piece must be split."""
-    vertices, local_F = _submesh(F, faces)
+    vertices, local_F = submesh(F, faces)
     Vl = V[vertices]
     small = len(faces) < cfg.min_faces or len(vertices) < MIN_POINTS
     if not small and depth <= cfg.max_depth:

@@ -391,12 +391,6 @@ def _clean_region(R: np.ndarray, F: np.ndarray, adj: np.ndarray, n_rings: int = 
     return np.sort(S[inside])
 
 
-def _submesh(V: np.ndarray, F: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    sub = F[faces]
-    verts, inv = np.unique(sub, return_inverse=True)
-    return V[verts].copy(), inv.reshape(-1, 3).astype(np.int64)
-
-
 def _brain_parcels(
     n: int,
     *,
@@ -439,7 +433,8 @@ def _brain_parcels(
         faces = _clean_region(np.sort(R), F, adj)
         if not (min_faces <= len(faces) <= max_faces):
             continue
-        Vp, Fp = _submesh(V, F, faces)
+        verts, Fp = mesh.submesh(F, faces)
+        Vp = V[verts]
         if not _is_disk(Fp):
             continue
         frac = hot_face[faces].mean()

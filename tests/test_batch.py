@@ -1,8 +1,6 @@
-import argparse
 import csv
 import json
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -13,14 +11,14 @@ import segparam.batch as batch
 from segparam.batch import (
     DONE_MARKER,
     SUMMARY_FIELDS,
-    add_batch_parser,
     assign_folders,
     expand_inputs,
     process_one,
     run_batch,
 )
+from segparam.cli import main
 from segparam.errors import MeshFileError, SegparamError
-from segparam.io import write_obj
+from segparam.export import write_obj
 from segparam.pipeline import PipelineConfig
 
 FAST = ["--resolution", "256", "--quiet"]
@@ -28,15 +26,8 @@ ATLAS_FILES = ["{s}.glb", "{s}.mtl", "{s}.obj", "{s}_checker.png", "{s}_uv.png",
 
 
 def run_cli(argv):
-    """``segparam batch ARGV`` as the CLI runs it: a SegparamError is exit code 2."""
-    parser = argparse.ArgumentParser(prog="segparam")
-    add_batch_parser(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(["batch", *map(str, argv)])
-    try:
-        return args.func(args)
-    except SegparamError as exc:
-        print(f"segparam: error: {exc}", file=sys.stderr)
-        return 2
+    """``segparam batch ARGV`` in this process (the CLI's ``main``: a SegparamError is exit 2)."""
+    return main(["batch", *map(str, argv)])
 
 
 def write_grid(path, nx=8, ny=7):
@@ -130,15 +121,12 @@ def test_failures_are_counted_on_stderr(collection, scheduler, tmp_path, capsys)
 def test_rerun_skips_what_is_done(first_run, collection, scheduler):
     outdir, _ = first_run
     mtimes = {p: p.stat().st_mtime_ns for p in outdir.glob("*/*")}
-    t0 = time.perf_counter()
     code = run_cli([collection, "-o", outdir, "--scheduler", scheduler, *FAST])
-    elapsed = time.perf_counter() - t0
     assert code == 1  # the broken file is tried again, and fails again
     rows, doc = read_summary(outdir)
     assert doc["counts"] == {"done": 0, "skipped": 3, "failed": 1, "pending": 0}
     assert {p: p.stat().st_mtime_ns for p in outdir.glob("*/*")} == mtimes  # nothing rewritten
     assert int(rows["grid"]["charts"]) >= 1  # the figures of the earlier run are kept
-    assert elapsed < 5
 
 
 def test_changed_seed_or_settings_reprocess(collection, scheduler, tmp_path):
@@ -201,7 +189,7 @@ def test_ctrl_c_exits_130_with_one_line(collection, tmp_path, monkeypatch, capsy
         raise KeyboardInterrupt
 
     monkeypatch.setattr(batch, "run_batch", interrupted)
-    monkeypatch.setattr(batch, "_import_dask", lambda: None)
+    monkeypatch.setattr(batch, "require_dask", lambda: None)
     assert run_cli([collection / "grid.obj", "-o", tmp_path / "out", "--quiet"]) == 130
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("segparam: interrupted")
@@ -228,8 +216,9 @@ def test_usage_errors_exit_2(collection, tmp_path, capsys):
     assert run_cli([collection, "-o", out, "--config", tmp_path / "bad.toml"]) == 2
     assert "no such config file" in capsys.readouterr().err
     assert run_cli([collection, "-o", out, "--workers", "0"]) == 2
-    with pytest.raises(SystemExit):  # argparse: one or the other
-        run_cli([collection, "-o", out, "--workers", "2", "--scheduler", "tcp://x:8786"])
+    # argparse: one or the other
+    assert run_cli([collection, "-o", out, "--workers", "2", "--scheduler", "tcp://x:8786"]) == 2
+    assert "not allowed with argument" in capsys.readouterr().err
 
 
 def test_expand_inputs_folders_globs_dedup_and_order(tmp_path):

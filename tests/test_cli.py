@@ -7,7 +7,8 @@ import pytest
 from meshes import tri_grid
 
 from segparam.cli import main
-from segparam.io import load_mesh, write_obj
+from segparam.export import write_obj
+from segparam.io import load_mesh
 
 
 @pytest.fixture
@@ -100,6 +101,7 @@ def test_console_script_runs_without_traceback(tmp_path):
         [sys.executable, "-m", "segparam.cli", "atlas", str(bad), "-o", str(tmp_path / "o")],
         capture_output=True,
         text=True,
+        cwd=tmp_path,  # not the repository: the child imports the package the tests import
     )
     assert result.returncode == 2
     assert "Traceback" not in result.stderr and result.stderr.count("\n") == 1

@@ -294,7 +294,7 @@ def no_stage(monkeypatch):
         (segparam.segment, "segment"),
         (segparam.split, "parameterize_charts"),
         (segparam.artifacts, "load_stage"),
-        (segparam.batch, "_import_dask"),
+        (segparam.batch, "require_dask"),
         (segparam.batch, "run_batch"),
     ]:
         monkeypatch.setattr(module, name, work)
@@ -365,7 +365,7 @@ def test_the_issue_command_in_a_fresh_process_prints_no_traceback(tmp_path):
     proc = subprocess.run(
         [sys.executable, "-m", "segparam.cli", "atlas", "--config", str(bad), "-o",
          str(tmp_path / "badout"), "--no-remesh"],
-        capture_output=True, text=True, timeout=120,
+        capture_output=True, text=True, timeout=120, cwd=tmp_path,
     )  # fmt: skip
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr.splitlines() == [

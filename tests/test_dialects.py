@@ -23,7 +23,8 @@ from hypothesis.extra import numpy as hnp
 from meshes import tri_grid
 
 from segparam.errors import MeshFileError
-from segparam.io import load_mesh, save_atlas, write_obj
+from segparam.export import save_atlas, write_obj
+from segparam.io import load_mesh
 
 PROPERTY = settings(
     max_examples=40,

@@ -22,8 +22,9 @@ import trimesh
 from meshes import tri_grid
 from PIL import Image
 
-import segparam.io as sio
-from segparam.io import checker_image, load_mesh, render_uv_layout, save_atlas, write_obj
+import segparam.export as export
+from segparam.export import checker_image, render_uv_layout, save_atlas, write_obj
+from segparam.io import load_mesh
 
 # ---------------------------------------------------------------------------------------------
 # Helpers
@@ -199,7 +200,7 @@ def awkward_floats(rng: np.random.Generator, shape) -> np.ndarray:
 
 @pytest.mark.parametrize("n", [1, 2, 16, 57, 300])
 def test_write_obj_text_is_what_savetxt_wrote(n, tmp_path, monkeypatch):
-    monkeypatch.setattr(sio, "_ROW_CHUNK", 16)  # rows formatted in several blocks
+    monkeypatch.setattr(export, "_ROW_CHUNK", 16)  # rows formatted in several blocks
     rng = np.random.default_rng(n)
     V = awkward_floats(rng, (n, 3))
     F = rng.integers(0, n, size=(2 * n + 1, 3))
@@ -278,13 +279,13 @@ def test_checker_has_the_former_pixels(size, squares):
     image = checker_image(size, squares)
     assert image.mode == "RGB"
     np.testing.assert_array_equal(np.asarray(image), expected)
-    png = Image.open(_io.BytesIO(sio._checker_png(size, squares)))
+    png = Image.open(_io.BytesIO(export._checker_png(size, squares)))
     np.testing.assert_array_equal(np.asarray(png), expected)
 
 
 def test_checker_png_is_made_once_per_size():
-    assert sio._checker_png(64) is sio._checker_png(64)
-    assert sio._checker_png(64) != sio._checker_png(32)
+    assert export._checker_png(64) is export._checker_png(64)
+    assert export._checker_png(64) != export._checker_png(32)
 
 
 @pytest.mark.parametrize("shape", [(1, 1), (7, 5), (64, 3), (3, 200)])
@@ -295,7 +296,7 @@ def test_png_bytes_decode_to_the_pixels(shape):
         np.zeros((*shape, 3), np.uint8),
         np.full((*shape, 3), 255, np.uint8),
     ):
-        image = Image.open(_io.BytesIO(sio._png_bytes(pixels)))
+        image = Image.open(_io.BytesIO(export._png_bytes(pixels)))
         image.load()
         assert image.mode == "RGB" and image.size == (shape[1], shape[0])
         np.testing.assert_array_equal(np.asarray(image), pixels)
@@ -303,9 +304,9 @@ def test_png_bytes_decode_to_the_pixels(shape):
 
 def test_png_bytes_refuse_what_is_not_rgb8():
     with pytest.raises(ValueError):
-        sio._png_bytes(np.zeros((4, 4), np.uint8))
+        export._png_bytes(np.zeros((4, 4), np.uint8))
     with pytest.raises(ValueError):
-        sio._png_bytes(np.zeros((4, 4, 3), np.float64))
+        export._png_bytes(np.zeros((4, 4, 3), np.float64))
 
 
 def former_fill(uv, F, labels, size) -> np.ndarray:
@@ -313,7 +314,7 @@ def former_fill(uv, F, labels, size) -> np.ndarray:
     from segparam.pack import rasterize_footprint
 
     n = int(labels.max()) + 1
-    colors = sio._palette(n).astype(np.uint8)
+    colors = export._palette(n).astype(np.uint8)
     img = np.full((size, size, 3), 255, dtype=np.uint8)
     for k in range(n):
         faces = np.flatnonzero(labels == k)
@@ -434,7 +435,7 @@ def test_save_atlas_does_not_import_trimesh(tmp_path):
         "import sys\n"
         "from types import SimpleNamespace\n"
         "import numpy as np\n"
-        "from segparam.io import save_atlas\n"
+        "from segparam.export import save_atlas\n"
         "atlas = SimpleNamespace(**np.load(sys.argv[1]), report=lambda: {},\n"
         "                        packing=SimpleNamespace(resolution=64))\n"
         "save_atlas(atlas, sys.argv[2])\n"
@@ -445,6 +446,7 @@ def test_save_atlas_does_not_import_trimesh(tmp_path):
         [sys.executable, "-c", code, str(tmp_path / "atlas.npz"), str(out)],
         capture_output=True,
         text=True,
+        cwd=tmp_path,  # not the repository: the child imports the package the tests import
     )
     assert result.returncode == 0, result.stderr
     assert (out / "mesh.glb").exists()

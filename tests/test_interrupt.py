@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from segparam.io import write_obj
+from segparam.export import write_obj
 from segparam.split import PARALLEL_MIN_FACES
 from segparam.synthetic import brain_like_surface
 
@@ -49,6 +49,7 @@ def test_ctrl_c_while_workers_start_is_one_line(tmp_path: Path, delay: float) ->
         stderr=subprocess.PIPE,
         stdout=subprocess.PIPE,
         env=env,
+        cwd=tmp_path,  # not the repository: the child imports the package the tests import
         start_new_session=True,  # its own process group, as a shell gives a command
     )  # fmt: skip
     deadline = time.monotonic() + 240

@@ -200,3 +200,36 @@ def test_face_neighbors_and_is_disk():
     assert not mesh.is_disk(tetrahedron()[1])  # closed
     assert not mesh.is_disk(torus()[1])
     assert not mesh.is_disk(np.array([[0, 1, 2], [0, 3, 4]]))  # bowtie
+
+
+def test_plane_basis_is_orthonormal_right_handed_and_never_degenerate():
+    rng = np.random.default_rng(0)
+    n = rng.normal(size=(200, 3))
+    n = np.vstack([n, np.eye(3), -np.eye(3)])  # the axes: x takes the y-axis helper
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    b1, b2 = mesh.plane_basis(n)
+    for a, b in [(b1, b1), (b2, b2)]:
+        np.testing.assert_allclose((a * b).sum(1), 1.0, atol=1e-14)
+    for a, b in [(b1, b2), (b1, n), (b2, n)]:
+        np.testing.assert_allclose((a * b).sum(1), 0.0, atol=1e-14)
+    np.testing.assert_allclose(np.cross(b1, b2), n, atol=1e-14)  # (b1, b2, n) right-handed
+    # the x axis itself: b1 = x cross y = z, b2 = x cross z = -y
+    b1, b2 = mesh.plane_basis(np.array([[1.0, 0, 0]]))
+    np.testing.assert_array_equal(b1, [[0, 0, 1.0]])
+    np.testing.assert_array_equal(b2, [[0, -1.0, 0]])
+
+
+def test_submesh_renumbers_the_faces_it_keeps():
+    F = np.array([[4, 7, 2], [2, 7, 9], [0, 1, 3]])
+    vertices, local_F = mesh.submesh(F, np.array([1, 0]))
+    np.testing.assert_array_equal(vertices, [2, 4, 7, 9])
+    np.testing.assert_array_equal(local_F, [[0, 2, 3], [1, 2, 0]])
+    np.testing.assert_array_equal(vertices[local_F], F[[1, 0]])
+    assert vertices.dtype == local_F.dtype == np.int64
+
+
+def test_group_by_label_lists_each_label_in_index_order():
+    labels = np.array([2, 0, 2, 2, 0, 3])
+    order, bounds = mesh.group_by_label(labels, 5)
+    groups = [order[bounds[k] : bounds[k + 1]].tolist() for k in range(5)]
+    assert groups == [[1, 4], [], [0, 2, 3], [5], []]

@@ -23,14 +23,23 @@ from meshes import tri_grid
 
 import segparam.artifacts
 import segparam.batch
+import segparam.export
 import segparam.io
 import segparam.pipeline
 from segparam import cli
 from segparam.artifacts import stage_paths
-from segparam.batch import assign_folders, process_one
+from segparam.batch import assign_folders, expand_inputs, process_one
 from segparam.cli import main
 from segparam.errors import ConfigError, MeshFileError, SegparamError, SolverError
-from segparam.io import ATLAS_SUFFIXES, fit_name, load_mesh, write_obj
+from segparam.export import write_obj
+from segparam.io import (
+    ATLAS_SUFFIXES,
+    SUPPORTED_SUFFIXES,
+    fit_name,
+    load_mesh,
+    mesh_stem,
+    split_suffix,
+)
 from segparam.pipeline import MAX_RESOLUTION, MAX_SEED, PipelineConfig, build_atlas, chart_room
 
 FAST = ["--resolution", "128", "--no-remesh", "--quiet"]
@@ -90,7 +99,7 @@ def no_work(monkeypatch):
         (segparam.pipeline, "build_atlas"),
         (segparam.pipeline, "pack_atlas"),
         (segparam.pipeline, "clean"),
-        (segparam.batch, "_import_dask"),
+        (segparam.batch, "require_dask"),
     ]:
         monkeypatch.setattr(module, name, work)
 
@@ -382,7 +391,7 @@ def test_atlas_save_raises_segparam_errors(small_atlas, tmp_path, monkeypatch):
     def disk_full(*args, **kwargs):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(segparam.io, "render_uv_layout", disk_full)
+    monkeypatch.setattr(segparam.export, "render_uv_layout", disk_full)
     out = tmp_path / "out"
     with pytest.raises(MeshFileError, match="No space left on device"):
         small_atlas.save(out, stem="grid")
@@ -546,3 +555,23 @@ def test_a_batch_row_names_the_reason_of_a_refusal(tmp_path):
     report = tmp_path / "out" / "parts" / "report.json"
     assert not report.exists()
     assert json.dumps(row)  # a plain row
+
+
+@pytest.mark.parametrize(
+    "name, stem, suffix",
+    [
+        ("lh.pial.gii.gz", "lh.pial", ".gii.gz"),
+        ("lh.pial.GII.GZ", "lh.pial", ".gii.gz"),
+        ("lh.pial.Gii", "lh.pial", ".gii"),
+        ("scan.OBJ", "scan", ".obj"),
+        ("archive.tar.gz", "archive.tar", ".gz"),
+        ("noext", "noext", ""),
+    ],
+)
+def test_split_suffix_knows_gii_gz_in_any_case(name, stem, suffix, tmp_path):
+    assert split_suffix(tmp_path / name) == (stem, suffix)
+    assert mesh_stem(name) == stem
+    if suffix in SUPPORTED_SUFFIXES:  # the batch takes it from a folder, whatever its case
+        write_obj(tmp_path / "m.obj", *tri_grid(2, 2))
+        (tmp_path / "m.obj").rename(tmp_path / name)
+        assert expand_inputs([tmp_path]) == [tmp_path / name]

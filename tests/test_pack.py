@@ -12,8 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from segparam import canvas, raster
-from segparam import pack as pack_module
+from segparam import raster
 from segparam.errors import ConfigError, InvalidMeshError
 from segparam.pack import (
     PackConfig,
@@ -249,105 +248,6 @@ def test_boundary_edges_refuses_meshes_the_fill_cannot_handle() -> None:
     assert raster.boundary_edges(twice) is None
 
 
-def _canvas_with_blobs(width: int, height: int, pad: int, seed: int, rule: str):
-    """A canvas (block 1) with six random blobs placed by one rule's search, and its state."""
-    rng = np.random.default_rng(seed)
-    forbid, sky, coarse, prefix, max_free, bits = canvas.new_canvas(width, height, pad, 1)
-    sky_min = np.empty(-(-width // canvas._SKY_BLOCK), dtype=np.int64)
-    canvas._sky_minima(sky, sky_min, 0, width)
-    for _ in range(6):
-        blob = rng.random((int(rng.integers(3, 12)), int(rng.integers(3, 12)))) < 0.7
-        blob |= np.arange(blob.shape[1]) == 0
-        r, c = blob.shape
-        if rule == "holes":
-            runs, cr, cc = canvas.coarse_runs(blob, r, c, 1)
-            got, rows, cols = canvas.holes(prefix, max_free, bits, runs, cr, cc, 1)
-        else:
-            bottom = np.where(blob.any(axis=0), np.argmax(blob, axis=0), canvas._EMPTY)
-            got, rows, cols = canvas.resting(
-                bottom.astype(np.int64), c, sky, sky_min, height - pad - r, 1, 16
-            )
-        if got:
-            row, col = canvas.slide(forbid, blob, r, c, int(rows[0]), int(cols[0]), 1024)
-            canvas.place(forbid, sky, coarse, prefix, max_free, bits, 1, blob, r, c, row, col, pad)
-            canvas._sky_minima(sky, sky_min, 0, width)
-    return forbid, sky, sky_min, prefix, max_free, bits
-
-
-def _fits(forbid, mask, row, col) -> bool:
-    r, c = mask.shape
-    return bool(canvas.fits(forbid, forbid.shape[0], forbid.shape[1], mask, r, c, row, col))
-
-
-def test_candidates_are_the_lowest_fitting_positions_per_column() -> None:
-    # with one texel per coarse cell the hole search must return exactly the lowest fitting
-    # row of each column (brute force below), lowest first
-    forbid, _, _, prefix, max_free, bits = _canvas_with_blobs(64, 72, 1, 0, "holes")
-    fp = np.tri(9, 14, 4, dtype=bool)
-    r, c = fp.shape
-    lowest = {}
-    for col in range(64 - c + 1):
-        for row in range(72 - r + 1):
-            if _fits(forbid, fp, row, col):
-                lowest[col] = row
-                break
-    runs, cr, cc = canvas.coarse_runs(fp, r, c, 1)
-    got, rows, cols = canvas.holes(prefix, max_free, bits, runs, cr, cc, 10**4)
-    assert got, "the canvas still has room"
-    rows, cols = rows[:got].tolist(), cols[:got].tolist()
-    assert rows == sorted(rows) and rows[0] == min(lowest.values())
-    assert dict(zip(cols, rows, strict=True)) == lowest
-
-
-@pytest.mark.parametrize("seed", range(3))
-def test_free_run_starts_from_bit_sets_match_brute_force(seed: int) -> None:
-    # the hole search finds where a run of free cells fits from 64-cell words, with shifts that
-    # cross word boundaries; check it against a direct scan on rows of 300 cells
-    rng = np.random.default_rng(seed)
-    nc = 300
-    free = rng.random((4, nc)) < rng.uniform(0.7, 0.999, (4, 1))
-    coarse = ~free
-    forbid = coarse.copy()  # one texel per cell
-    _, _, c, prefix, max_free, bits = canvas.new_canvas(nc, 4, 0, 1)
-    canvas._pool_rows(forbid, 1, c, prefix, max_free, bits, 0, 4, 0, nc)
-    out = np.empty(bits.shape[1], dtype=np.uint64)
-    for row in range(4):
-        for length in (1, 2, 5, 63, 64, 65, 130, 200):
-            canvas._runs_of(bits, row, length, out)
-            got = [p for p in range(64 * len(out)) if int(out[p // 64]) >> (p % 64) & 1]
-            want = [p for p in range(nc - length + 1) if free[row, p : p + length].all()]
-            assert got == want
-
-
-def test_coarse_hole_search_never_misses_a_free_coarse_position() -> None:
-    # with 3-texel cells a position is reported only where the coarse footprint meets no
-    # forbidden cell, and every such position of the lowest row is reported
-    forbid = _canvas_with_blobs(96, 108, 1, 3, "holes")[0]
-    _, _, coarse, prefix, max_free, bits = canvas.new_canvas(96, 108, 1, 3)
-    nr, nc = coarse.shape
-    canvas._pool_rows(forbid, 3, coarse, prefix, max_free, bits, 0, nr, 0, nc)
-    fp = np.tri(10, 16, 5, dtype=bool)
-    runs, cr, cc = canvas.coarse_runs(fp, *fp.shape, 3)
-    cfp = np.zeros((cr, cc), dtype=bool)
-    for i, c0, c1 in runs:
-        cfp[i, c0 : c1 + 1] = True
-    free = {
-        (y, j)
-        for y in range(coarse.shape[0] - cr + 1)
-        for j in range(coarse.shape[1] - cc + 1)
-        if not (coarse[y : y + cr, j : j + cc] & cfp).any()
-    }
-    got, rows, cols = canvas.holes(prefix, max_free, bits, runs, cr, cc, 10**4)
-    found = set(zip(rows[:got].tolist(), cols[:got].tolist(), strict=True))
-    assert found <= free
-    lowest = min(y for y, _ in free)
-    assert {p for p in free if p[0] == lowest} <= found
-
-
-# ----------------------------------------------------------------------------------------------
-# packing: invariants
-
-
 @pytest.fixture(scope="module")
 def mixed() -> tuple[list, list, np.ndarray]:
     return mixed_charts(24, seed=1)
@@ -449,26 +349,29 @@ def _turns_off_quarter(uvs, transforms) -> np.ndarray:
     return np.minimum(off, 90 - off)
 
 
-def test_resting_rule_turns_round_charts_by_fine_angles_and_rectangles_by_quarter_turns() -> None:
-    # one trial of the "rest" rule with 30-degree steps: the discs and ellipses use the extra
-    # angles, the rectangles (hull = box) only quarter turns, and the layout is valid
-    uvs, faces, areas = mixed_charts(20, seed=9)
+def test_round_charts_turn_by_fine_angles_and_rectangles_by_quarter_turns() -> None:
+    # similar-sized ellipses (what organic surfaces give) and one rectangle, 30-degree steps:
+    # some layouts turn ellipses by 30 or 60 degrees, the rectangle only ever by quarter turns,
+    # every turn is a multiple of 30 degrees and every layout is valid
     strip, Fs = grid(5, 2)
-    uvs, faces, areas = [*uvs, rotate(strip, 0.3)], [*faces, Fs], np.r_[areas, areas.max()]
-    charts = pack_module._prepare(uvs, faces, areas)
-    boxy = np.array([ch.boxy for ch in charts])
-    assert boxy[-1] and not boxy[0] and not boxy[1]  # the strip; a disc and an ellipse are not
-    order = np.argsort([-ch.area for ch in charts], kind="stable")
-    s = 0.7 * pack_module._scale_bounds(charts, 160, 2)
-    angles = pack_module._Angles(charts, 3)
-    placed, fraction, need = pack_module._raster_trial(charts, order, s, 160, 2, 4, "rest", angles)
-    assert placed is not None and fraction == 1.0 and need <= 160
-    res = pack_module._finish(charts, placed, s, 160, 2, 1, "raster")
-    assert_valid_layout(res, faces)
-    off = _turns_off_quarter(uvs, res.transforms)
-    assert np.all(off[boxy] < 1e-6)
-    assert np.any(off[~boxy] > 29), "no round chart used a 30 or 60 degree turn"
-    assert np.all(np.isclose(off % 30, 0, atol=1e-6) | np.isclose(off % 30, 30, atol=1e-6))
+    fine = 0
+    for seed, resolution in [(0, 256), (1, 128), (2, 128)]:
+        rng = np.random.default_rng(seed)
+        uvs, faces = [], []
+        for _ in range(10):
+            uv, F = disc(aspect=rng.uniform(0.4, 0.7))
+            uvs.append(rotate(uv, rng.uniform(0, 2 * np.pi)) * rng.uniform(0.5, 3))
+            faces.append(F)
+        uvs, faces = [*uvs, rotate(strip, 0.3)], [*faces, Fs]
+        areas = np.r_[rng.uniform(0.8, 1.0, 10), 0.9]
+        config = PackConfig(resolution=resolution, padding=2, angle_steps=3)
+        res = pack_charts(uvs, faces, areas, config=config)
+        assert_valid_layout(res, faces)
+        off = _turns_off_quarter(uvs, res.transforms)
+        assert off[-1] < 1e-6  # the rectangle
+        assert np.all(np.isclose(off % 30, 0, atol=1e-6) | np.isclose(off % 30, 30, atol=1e-6))
+        fine += int(np.sum(off > 29))
+    assert fine > 0, "no ellipse used a 30 or 60 degree turn"
 
 
 def test_no_fine_angles_with_one_step_or_without_rotation() -> None:
@@ -479,93 +382,7 @@ def test_no_fine_angles_with_one_step_or_without_rotation() -> None:
         assert np.all(_turns_off_quarter(uvs, res.transforms) < 1e-6)
 
 
-def test_resting_positions_are_the_lowest_drop_positions() -> None:
-    # a footprint "rests" at (row, col) when it can come straight down from the top to there:
-    # it fits at that row and at every row above. The skyline search must return, per column,
-    # the lowest such row (brute force below), lowest first.
-    forbid, sky, sky_min, _, _, _ = _canvas_with_blobs(64, 72, 1, 1, "rest")
-    fp = np.tri(9, 14, 4, dtype=bool)[::-1].copy()
-    r, c = fp.shape
-    top = 72 - 1 - r  # highest row inside the top border
-    lowest = {}
-    for col in range(64 - c + 1):
-        if not _fits(forbid, fp, top, col):
-            continue
-        row = top
-        while row > 0 and _fits(forbid, fp, row - 1, col):
-            row -= 1
-        lowest[col] = row
-    bottom = np.where(fp.any(axis=0), np.argmax(fp, axis=0), canvas._EMPTY).astype(np.int64)
-    got, rows, cols = canvas.resting(bottom, c, sky, sky_min, top, 10**4, 16)
-    assert got, "the canvas still has room"
-    rows, cols = rows[:got].tolist(), cols[:got].tolist()
-    assert rows == sorted(rows) and rows[0] == min(lowest.values())
-    assert dict(zip(cols, rows, strict=True)) == lowest
-
-
-@pytest.mark.parametrize("seed", range(4))
-def test_resting_search_pruning_gives_the_full_searchs_answer(seed: int) -> None:
-    # the pruned search (sampled columns first, skyline blocks skipped) must return exactly
-    # the `count` best of the full max-plus correlation, on rough skylines
-    rng = np.random.default_rng(seed)
-    width, height, pad = 300, 340, 2
-    sky = np.full(width, height, dtype=np.int64)
-    sky[2:-2] = np.cumsum(rng.integers(-6, 7, 296)).clip(-40, 200) + 60
-    sky_min = np.empty(-(-width // canvas._SKY_BLOCK), dtype=np.int64)
-    canvas._sky_minima(sky, sky_min, 0, width)
-    for _ in range(5):
-        mask = np.tri(int(rng.integers(5, 60)), int(rng.integers(20, 200)), 0, dtype=bool)
-        mask = mask[:, ::-1] if rng.random() < 0.5 else mask
-        mask |= rng.random(mask.shape) < 0.3
-        rows, cols = mask.shape
-        bottom = np.where(mask.any(axis=0), np.argmax(mask, axis=0), canvas._EMPTY)
-        full = np.maximum(
-            (np.lib.stride_tricks.sliding_window_view(sky, cols) - bottom).max(axis=1), 0
-        )
-        top = height - pad - rows
-        x = np.flatnonzero(full <= top)
-        for count in (1, 2, 7):
-            best = x[np.lexsort((x, full[x]))[:count]]
-            got, r, c = canvas.resting(bottom.astype(np.int64), cols, sky, sky_min, top, count, 16)
-            assert list(zip(r[:got].tolist(), c[:got].tolist(), strict=True)) == [
-                (int(full[j]), int(j)) for j in best
-            ]
-
-
-def test_turned_footprints_and_their_profiles_match_numpy() -> None:
-    # the quarter turns are searched from the base footprint's profiles, never rasterized again
-    rng = np.random.default_rng(4)
-    for _ in range(10):
-        base = rng.random((int(rng.integers(1, 15)), int(rng.integers(1, 15)))) < 0.5
-        base[rng.integers(base.shape[0]), rng.integers(base.shape[1])] = True
-        r, c = base.shape
-        low, high, left, right, cy, cx = canvas._profiles(base, r, c)
-        for k in range(4):
-            want = np.rot90(base, -k)
-            out = np.zeros((max(r, c), max(r, c)), dtype=bool)
-            assert canvas.turned(base, r, c, k, out) == want.shape
-            assert np.array_equal(out[: want.shape[0], : want.shape[1]], want)
-            prof = np.empty(max(r, c), dtype=np.int64)
-            rr, cc, y = canvas._turned_bottom(low, high, left, right, r, c, cy, cx, k, prof)
-            bottom = np.where(want.any(axis=0), np.argmax(want, axis=0), canvas._EMPTY)
-            assert (rr, cc) == want.shape and np.array_equal(prof[:cc], bottom)
-            per_row = want.sum(axis=1)
-            assert np.isclose(y, per_row @ np.arange(len(per_row)) / per_row.sum())
-
-
-def test_a_scale_fits_when_either_rule_fits(monkeypatch) -> None:
-    # with the "rest" rule disabled the "holes" rule alone still packs every chart; with both,
-    # the packer keeps whichever layout fits
-    uvs, faces, areas = mixed_charts(12, seed=5)
-    both = pack_charts(uvs, faces, areas, config=PackConfig(resolution=192))
-    monkeypatch.setattr(pack_module, "_RULE_ORDER", ("holes",))
-    alone = pack_charts(uvs, faces, areas, config=PackConfig(resolution=192))
-    assert_valid_layout(alone, faces)
-    assert_valid_layout(both, faces)
-    assert np.all(_turns_off_quarter(uvs, alone.transforms) < 1e-6)
-
-
-def test_folded_chart_uses_the_triangle_rasterizer() -> None:
+def test_a_folded_chart_packs_without_overlap() -> None:
     # a chart whose uv map folds over itself (one triangle flipped) cannot be filled from its
     # outline; the packer falls back to rasterizing every triangle and stays valid
     uv, F = grid(4, 4)
@@ -573,8 +390,6 @@ def test_folded_chart_uses_the_triangle_rasterizer() -> None:
     uv[6] = [2.6, 2.7]  # pull an interior vertex past its neighbours: some triangles flip
     uvs, faces = [uv, *mixed_charts(5, seed=3)[0]], [F, *mixed_charts(5, seed=3)[1]]
     areas = [2.0, *mixed_charts(5, seed=3)[2]]
-    charts = pack_module._prepare(uvs, faces, areas)
-    assert charts[0].boundary is None and all(c.boundary is not None for c in charts[1:])
     res = pack_charts(uvs, faces, areas, config=PackConfig(resolution=128))
     assert_valid_layout(res, faces)
 

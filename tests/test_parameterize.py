@@ -355,3 +355,34 @@ def test_charts_quality_is_chart_quality_chart_by_chart():
             assert getattr(q, name) == pytest.approx(value, rel=1e-12, abs=1e-12), name
     assert bijective == [True, False, False, False, True, False]
     assert got[1].n_crossings > 0 and got[2].n_flipped > 0 and not got[3].loops_oriented
+
+
+def test_isometric_fit_undoes_a_stretch_by_hand():
+    """Y = X R S (a rotation, then a stretch along the axes): M = S^-2 fits every triangle
+    exactly (G_t^T M G_t = I), A = M^(1/2) = S^-1, so uv = Y S^-1 = X R, the flat chart rotated."""
+    from segparam.parameterize import isometric_fit
+
+    V, F = tri_grid(5, 4)  # z = 0: the 3-D chart is its own flat layout X = V[:, :2]
+    c, s = np.cos(0.7), np.sin(0.7)
+    R = np.array([[c, -s], [s, c]])
+    S = np.diag([3.0, 0.25])
+    uv = isometric_fit(V, F, V[:, :2] @ R @ S)
+    np.testing.assert_allclose(uv, V[:, :2] @ R, atol=1e-12)
+    # A rotation alone is already isometric: A = I.
+    np.testing.assert_allclose(isometric_fit(V, F, V[:, :2] @ R), V[:, :2] @ R, atol=1e-12)
+
+
+def test_classic_hlle_matrix_of_six_points_is_the_projector_off_affine_functions():
+    """With 6 points every neighbourhood is all of them and Y = [1, u, v, u^2, uv, v^2] is
+    square: its last three Gram-Schmidt columns span the complement of span(1, u, v), so each
+    W_i = I - P with P the projector onto the affine functions, and K = 6 (I - P)."""
+    from segparam.parameterize import classic_hlle_matrix
+
+    X = np.array([[0, 0], [1, 0], [0, 1], [1, 1], [2.0, 0.5], [0.3, 2.0]])  # on no conic
+    tilt = np.array([[1.0, 0, 0.5], [0, 1, -0.25]])  # a plane through the origin, tilted
+    V = X @ tilt + [3.0, -1, 2]
+    A = np.column_stack([np.ones(6), X])
+    P = A @ np.linalg.pinv(A)
+    K = classic_hlle_matrix(V, n_neighbors=12).toarray()
+    np.testing.assert_allclose(K, 6 * (np.eye(6) - P), atol=1e-10)
+    np.testing.assert_allclose(K @ A, 0, atol=1e-10)  # constants and coordinates: no Hessian

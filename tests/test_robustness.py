@@ -20,12 +20,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from meshes import plate_with_holes, rigid, tri_grid
 
+import segparam.export
 import segparam.io
 import segparam.pipeline
 from segparam.clean import clean
 from segparam.cli import main
 from segparam.errors import InvalidMeshError, MeshFileError, SegparamError
-from segparam.io import load_mesh, write_obj
+from segparam.export import write_obj
+from segparam.io import load_mesh
 from segparam.pipeline import PipelineConfig, build_atlas
 from segparam.quality import signed_areas
 from segparam.segment import segment
@@ -275,7 +277,7 @@ def test_bad_file_in_a_fresh_process_has_no_traceback(tmp_path):
     path = _truncated(tmp_path / "cut mesh.stl", 0.5)
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "segparam.cli", "atlas", str(path), "-o", str(out)]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr
     assert len(proc.stderr.splitlines()) == 1 and path.name in proc.stderr
@@ -399,13 +401,9 @@ def test_coordinates_beyond_float64_geometry_are_an_error():
             call(V * 1e200, F)
 
 
-def test_coordinates_of_1e100_give_an_atlas_or_a_segparam_error():
+def test_coordinates_of_1e100_give_an_atlas():
     V, F = wavy_grid()
-    try:
-        atlas = build_atlas(V * 1e100, F, CFG)
-    except SegparamError:
-        return
-    assert_valid_atlas(atlas)
+    assert_valid_atlas(build_atlas(V * 1e100, F, CFG))  # every stage works in the unit frame
 
 
 def test_parser_warnings_stay_off_stderr(tmp_path, capsys):
@@ -506,15 +504,17 @@ def test_same_input_and_seed_give_the_same_files(tmp_path, capsys):
     _compare_outputs(tmp_path / "a", tmp_path / "b")
 
 
-@pytest.mark.slow
 def test_a_fresh_process_gives_the_same_files(tmp_path, capsys):
+    """No state of this process (hash seed, caches, imports) shapes the atlas: a new process with
+    another hash seed writes the same files. Small mesh: the cost is the process start (~2 s)."""
     V, F, _ = messy_mesh()
     path = tmp_path / "messy.obj"
     write_obj(path, V, F)
     assert run_atlas(path, tmp_path / "a", capsys, "--seed", "3")[0] == 0
     cmd = [sys.executable, "-m", "segparam.cli", "atlas", str(path), "-o", str(tmp_path / "b")]
     env = {**os.environ, "PYTHONHASHSEED": "12345"}
-    proc = subprocess.run([*cmd, *FAST, "--seed", "3"], capture_output=True, env=env, timeout=300)
+    argv = [*cmd, *FAST, "--seed", "3"]  # cwd: not the repository, which python -m would import
+    proc = subprocess.run(argv, capture_output=True, env=env, timeout=300, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     _compare_outputs(tmp_path / "a", tmp_path / "b")
 
@@ -567,7 +567,7 @@ def test_ctrl_c_exits_130_and_leaves_no_file(where, tmp_path, capsys, monkeypatc
     if where == "pack":
         monkeypatch.setattr(segparam.pipeline, "pack_charts", _interrupt)
     elif where == "render":
-        monkeypatch.setattr(segparam.io, "render_uv_layout", _interrupt)
+        monkeypatch.setattr(segparam.export, "render_uv_layout", _interrupt)
     else:
         _interrupt_between_moves(monkeypatch, out)
     code, lines = run_atlas(path, out, capsys)

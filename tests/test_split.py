@@ -118,3 +118,21 @@ def test_worker_processes_give_the_same_charts(monkeypatch):
     assert np.array_equal(serial.splits, parallel.splits)
     for a, b in zip(serial.charts, parallel.charts, strict=True):
         assert np.array_equal(a.faces, b.faces) and np.array_equal(a.uv, b.uv)
+
+
+def test_chart_affinity_is_the_mesh_wide_one_restricted_and_built_on_first_use(monkeypatch):
+    import segparam.split as split
+    from segparam.segment import face_affinity
+
+    V, F = plate_with_holes()
+    faces = np.array([7, 3, 11, 12, 4])
+    built = []
+    monkeypatch.setattr(split, "face_affinity", lambda V, F: built.append(1) or face_affinity(V, F))
+    affinity = split._MeshAffinity(V, F)
+    later = affinity.of_chart(faces, now=False)
+    assert built == []  # nothing built until a chart must be split
+    W = later()
+    expected = face_affinity(V, F)[faces][:, faces]
+    assert (W != expected).nnz == 0
+    now = affinity.of_chart(faces, now=True)  # what a worker process gets, already restricted
+    assert (now() != expected).nnz == 0 and built == [1]  # built once for the mesh

@@ -20,7 +20,8 @@ from meshes import tri_grid
 import segparam.io
 from segparam.cli import main
 from segparam.errors import MeshFileError
-from segparam.io import atlas_file_names, staged_outputs, write_obj
+from segparam.export import write_obj
+from segparam.io import atlas_file_names, staged_outputs
 
 NAMES = sorted(atlas_file_names("scan").values())  # what an atlas folder holds
 USER_FILES = {"notes.txt": b"mine, not segparam's", "scan.blend": b"\x00blender\xff"}

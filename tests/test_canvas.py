@@ -1,0 +1,185 @@
+"""White-box tests of the packer's compiled canvas kernels (segparam.canvas) against brute force.
+
+They call the kernels and some of their private helpers directly, so they change with the canvas;
+tests/test_pack.py checks the packer through its public functions only.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from segparam import canvas
+
+
+def _canvas_with_blobs(width: int, height: int, pad: int, seed: int, rule: str):
+    """A canvas (block 1) with six random blobs placed by one rule's search, and its state."""
+    rng = np.random.default_rng(seed)
+    forbid, sky, coarse, prefix, max_free, bits = canvas.new_canvas(width, height, pad, 1)
+    sky_min = np.empty(-(-width // canvas._SKY_BLOCK), dtype=np.int64)
+    canvas._sky_minima(sky, sky_min, 0, width)
+    for _ in range(6):
+        blob = rng.random((int(rng.integers(3, 12)), int(rng.integers(3, 12)))) < 0.7
+        blob |= np.arange(blob.shape[1]) == 0
+        r, c = blob.shape
+        if rule == "holes":
+            runs, cr, cc = canvas.coarse_runs(blob, r, c, 1)
+            got, rows, cols = canvas.holes(prefix, max_free, bits, runs, cr, cc, 1)
+        else:
+            bottom = np.where(blob.any(axis=0), np.argmax(blob, axis=0), canvas._EMPTY)
+            got, rows, cols = canvas.resting(
+                bottom.astype(np.int64), c, sky, sky_min, height - pad - r, 1, 16
+            )
+        if got:
+            row, col = canvas.slide(forbid, blob, r, c, int(rows[0]), int(cols[0]), 1024)
+            canvas.place(forbid, sky, coarse, prefix, max_free, bits, 1, blob, r, c, row, col, pad)
+            canvas._sky_minima(sky, sky_min, 0, width)
+    return forbid, sky, sky_min, prefix, max_free, bits
+
+
+def _fits(forbid, mask, row, col) -> bool:
+    r, c = mask.shape
+    return bool(canvas.fits(forbid, forbid.shape[0], forbid.shape[1], mask, r, c, row, col))
+
+
+def test_candidates_are_the_lowest_fitting_positions_per_column() -> None:
+    # with one texel per coarse cell the hole search must return exactly the lowest fitting
+    # row of each column (brute force below), lowest first
+    forbid, _, _, prefix, max_free, bits = _canvas_with_blobs(64, 72, 1, 0, "holes")
+    fp = np.tri(9, 14, 4, dtype=bool)
+    r, c = fp.shape
+    lowest = {}
+    for col in range(64 - c + 1):
+        for row in range(72 - r + 1):
+            if _fits(forbid, fp, row, col):
+                lowest[col] = row
+                break
+    runs, cr, cc = canvas.coarse_runs(fp, r, c, 1)
+    got, rows, cols = canvas.holes(prefix, max_free, bits, runs, cr, cc, 10**4)
+    assert got, "the canvas still has room"
+    rows, cols = rows[:got].tolist(), cols[:got].tolist()
+    assert rows == sorted(rows) and rows[0] == min(lowest.values())
+    assert dict(zip(cols, rows, strict=True)) == lowest
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_free_run_starts_from_bit_sets_match_brute_force(seed: int) -> None:
+    # the hole search finds where a run of free cells fits from 64-cell words, with shifts that
+    # cross word boundaries; check it against a direct scan on rows of 300 cells
+    rng = np.random.default_rng(seed)
+    nc = 300
+    free = rng.random((4, nc)) < rng.uniform(0.7, 0.999, (4, 1))
+    coarse = ~free
+    forbid = coarse.copy()  # one texel per cell
+    _, _, c, prefix, max_free, bits = canvas.new_canvas(nc, 4, 0, 1)
+    canvas._pool_rows(forbid, 1, c, prefix, max_free, bits, 0, 4, 0, nc)
+    out = np.empty(bits.shape[1], dtype=np.uint64)
+    for row in range(4):
+        for length in (1, 2, 5, 63, 64, 65, 130, 200):
+            canvas._runs_of(bits, row, length, out)
+            got = [p for p in range(64 * len(out)) if int(out[p // 64]) >> (p % 64) & 1]
+            want = [p for p in range(nc - length + 1) if free[row, p : p + length].all()]
+            assert got == want
+
+
+def test_coarse_hole_search_never_misses_a_free_coarse_position() -> None:
+    # with 3-texel cells a position is reported only where the coarse footprint meets no
+    # forbidden cell, and every such position of the lowest row is reported
+    forbid = _canvas_with_blobs(96, 108, 1, 3, "holes")[0]
+    _, _, coarse, prefix, max_free, bits = canvas.new_canvas(96, 108, 1, 3)
+    nr, nc = coarse.shape
+    canvas._pool_rows(forbid, 3, coarse, prefix, max_free, bits, 0, nr, 0, nc)
+    fp = np.tri(10, 16, 5, dtype=bool)
+    runs, cr, cc = canvas.coarse_runs(fp, *fp.shape, 3)
+    cfp = np.zeros((cr, cc), dtype=bool)
+    for i, c0, c1 in runs:
+        cfp[i, c0 : c1 + 1] = True
+    free = {
+        (y, j)
+        for y in range(coarse.shape[0] - cr + 1)
+        for j in range(coarse.shape[1] - cc + 1)
+        if not (coarse[y : y + cr, j : j + cc] & cfp).any()
+    }
+    got, rows, cols = canvas.holes(prefix, max_free, bits, runs, cr, cc, 10**4)
+    found = set(zip(rows[:got].tolist(), cols[:got].tolist(), strict=True))
+    assert found <= free
+    lowest = min(y for y, _ in free)
+    assert {p for p in free if p[0] == lowest} <= found
+
+
+# ----------------------------------------------------------------------------------------------
+# packing: invariants
+
+
+def test_resting_positions_are_the_lowest_drop_positions() -> None:
+    # a footprint "rests" at (row, col) when it can come straight down from the top to there:
+    # it fits at that row and at every row above. The skyline search must return, per column,
+    # the lowest such row (brute force below), lowest first.
+    forbid, sky, sky_min, _, _, _ = _canvas_with_blobs(64, 72, 1, 1, "rest")
+    fp = np.tri(9, 14, 4, dtype=bool)[::-1].copy()
+    r, c = fp.shape
+    top = 72 - 1 - r  # highest row inside the top border
+    lowest = {}
+    for col in range(64 - c + 1):
+        if not _fits(forbid, fp, top, col):
+            continue
+        row = top
+        while row > 0 and _fits(forbid, fp, row - 1, col):
+            row -= 1
+        lowest[col] = row
+    bottom = np.where(fp.any(axis=0), np.argmax(fp, axis=0), canvas._EMPTY).astype(np.int64)
+    got, rows, cols = canvas.resting(bottom, c, sky, sky_min, top, 10**4, 16)
+    assert got, "the canvas still has room"
+    rows, cols = rows[:got].tolist(), cols[:got].tolist()
+    assert rows == sorted(rows) and rows[0] == min(lowest.values())
+    assert dict(zip(cols, rows, strict=True)) == lowest
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_resting_search_pruning_gives_the_full_searchs_answer(seed: int) -> None:
+    # the pruned search (sampled columns first, skyline blocks skipped) must return exactly
+    # the `count` best of the full max-plus correlation, on rough skylines
+    rng = np.random.default_rng(seed)
+    width, height, pad = 300, 340, 2
+    sky = np.full(width, height, dtype=np.int64)
+    sky[2:-2] = np.cumsum(rng.integers(-6, 7, 296)).clip(-40, 200) + 60
+    sky_min = np.empty(-(-width // canvas._SKY_BLOCK), dtype=np.int64)
+    canvas._sky_minima(sky, sky_min, 0, width)
+    for _ in range(5):
+        mask = np.tri(int(rng.integers(5, 60)), int(rng.integers(20, 200)), 0, dtype=bool)
+        mask = mask[:, ::-1] if rng.random() < 0.5 else mask
+        mask |= rng.random(mask.shape) < 0.3
+        rows, cols = mask.shape
+        bottom = np.where(mask.any(axis=0), np.argmax(mask, axis=0), canvas._EMPTY)
+        full = np.maximum(
+            (np.lib.stride_tricks.sliding_window_view(sky, cols) - bottom).max(axis=1), 0
+        )
+        top = height - pad - rows
+        x = np.flatnonzero(full <= top)
+        for count in (1, 2, 7):
+            best = x[np.lexsort((x, full[x]))[:count]]
+            got, r, c = canvas.resting(bottom.astype(np.int64), cols, sky, sky_min, top, count, 16)
+            assert list(zip(r[:got].tolist(), c[:got].tolist(), strict=True)) == [
+                (int(full[j]), int(j)) for j in best
+            ]
+
+
+def test_turned_footprints_and_their_profiles_match_numpy() -> None:
+    # the quarter turns are searched from the base footprint's profiles, never rasterized again
+    rng = np.random.default_rng(4)
+    for _ in range(10):
+        base = rng.random((int(rng.integers(1, 15)), int(rng.integers(1, 15)))) < 0.5
+        base[rng.integers(base.shape[0]), rng.integers(base.shape[1])] = True
+        r, c = base.shape
+        low, high, left, right, cy, cx = canvas._profiles(base, r, c)
+        for k in range(4):
+            want = np.rot90(base, -k)
+            out = np.zeros((max(r, c), max(r, c)), dtype=bool)
+            assert canvas.turned(base, r, c, k, out) == want.shape
+            assert np.array_equal(out[: want.shape[0], : want.shape[1]], want)
+            prof = np.empty(max(r, c), dtype=np.int64)
+            rr, cc, y = canvas._turned_bottom(low, high, left, right, r, c, cy, cx, k, prof)
+            bottom = np.where(want.any(axis=0), np.argmax(want, axis=0), canvas._EMPTY)
+            assert (rr, cc) == want.shape and np.array_equal(prof[:cc], bottom)
+            per_row = want.sum(axis=1)
+            assert np.isclose(y, per_row @ np.arange(len(per_row)) / per_row.sum())
