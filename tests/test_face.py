@@ -12,12 +12,12 @@ import types
 import numpy as np
 import pytest
 import trimesh
+from meshes import tri_grid
 
 import segparam
 from segparam.errors import ConfigError, InvalidMeshError
 from segparam.pipeline import PipelineConfig, build_atlas
 from segparam.quality import signed_areas
-from tests.meshes import tri_grid
 
 HEAVY = ("numpy", "numba", "scipy", "pymeshlab", "trimesh")
 FAST = PipelineConfig().replace(pack={"resolution": 256})

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from meshes import rigid, tri_grid
 
 from segparam.errors import InvalidMeshError
 from segparam.pack import PackConfig
@@ -20,7 +21,6 @@ from segparam.repack import (
     repack,
     uv_islands,
 )
-from tests.meshes import rigid, tri_grid
 
 PACK = PackConfig(resolution=256, padding=2)
 
