@@ -28,7 +28,7 @@ _EXPORTS = {
     "config_from_dict": "pipeline",
     # files
     "load_mesh": "io",
-    "save_atlas": "io",
+    "save_atlas": "export",
     # stages, their configs and results
     "CleanResult": "clean",
     "RemeshConfig": "remesh",
@@ -123,8 +123,9 @@ if TYPE_CHECKING:  # pragma: no cover
     from . import clean, remesh, repack, segment
     from .clean import CleanResult
     from .errors import ConfigError, InvalidMeshError, MeshFileError, SegparamError, SolverError
+    from .export import save_atlas
     from .interop import parametrize, unwrap
-    from .io import load_mesh, save_atlas
+    from .io import load_mesh
     from .pack import PackConfig, PackResult, pack_charts
     from .parameterize import ChartMap, HessianSolver, parameterize_chart
     from .pipeline import (
