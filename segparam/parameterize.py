@@ -61,6 +61,7 @@ from .quality import (
     singular_values,
     triangle_frames,
 )
+from .refine import slim_refine
 
 log = logging.getLogger(__name__)
 
@@ -84,7 +85,9 @@ __all__ = [
 ]
 
 METHODS = ("hessian", "classic-hlle")
-REFINES = ("arap", "none")
+#: "slim": ARAP, then the symmetric Dirichlet refinement of :mod:`segparam.refine` on a
+#: flip-free map; "arap": ARAP alone; "none": the paper's map.
+REFINES = ("slim", "arap", "none")
 TANGENTS = ("normals", "pca")
 #: A quadratic in (u, v) has 6 coefficients, so a least-squares fit needs at least 6 points.
 MIN_POINTS = 6
@@ -774,7 +777,9 @@ class HessianSolver:
         ``refine="arap"`` runs :func:`arap_refine` from the Hessian map and keeps the refined map
         unless it is worse: it is kept when it is bijective, or when neither map is and it has
         fewer flipped triangles. A map that is already rigid (see :func:`arap_refine`) is not
-        refined. ``refine="none"`` returns the paper's map as it is.
+        refined. ``refine="slim"`` then lowers the symmetric Dirichlet energy of a map with no
+        flipped triangle (:func:`segparam.refine.slim_refine`), kept when bijective.
+        ``refine="none"`` returns the paper's map as it is.
         """
         seed = check_int("seed", seed, low=0)
         refine = check_choice("refine", refine, REFINES)
@@ -789,7 +794,7 @@ class HessianSolver:
         refined = False
         quality = None
         steps = 0
-        if refine == "arap":
+        if refine in ("arap", "slim"):
             uv_r, steps = _arap(
                 self._Vn, self.F, uv, iterations=refine_iterations, inv_frames=frames
             )
@@ -803,6 +808,11 @@ class HessianSolver:
                     uv, quality, refined = uv_r, q_r, True
         if quality is None:
             quality = chart_quality(self._Vn, self.F, uv, frames)
+        if refine == "slim" and quality.n_flipped == 0 and quality.n_degenerate == 0:
+            uv_s, moved = slim_refine(self._Vn, self.F, uv, inv_frames=frames)
+            q_s = chart_quality(self._Vn, self.F, uv_s, frames) if moved[0] else None
+            if q_s is not None and q_s.bijective:
+                uv, quality, refined = uv_s, q_s, True
         t3 = time.perf_counter()
         return ChartMap(
             uv=(uv - uv.min(axis=0)) * self.scale,
@@ -849,9 +859,11 @@ def parameterize_chart(
         Smallest neighbourhood for the quadratic fit (``"hessian"``).
     n_neighbors : int
         Neighbourhood size of ``"classic-hlle"``.
-    refine : {"arap", "none"}
+    refine : {"slim", "arap", "none"}
         ``"arap"`` (default): as-rigid-as-possible iterations from the eigenmap, kept only when
-        they do not make the map worse (:meth:`HessianSolver.solve`); ``"none"``: the paper's map.
+        they do not make the map worse (:meth:`HessianSolver.solve`); ``"slim"``: the same, then
+        the flip-free symmetric Dirichlet refinement (:mod:`segparam.refine`), kept when
+        bijective; ``"none"``: the paper's map.
 
     Returns
     -------
@@ -1317,7 +1329,7 @@ def solve_charts(
     uv[mirror[vert_chart], 0] *= -1.0
     q = charts_quality(Vn, F, uv, vert_chart, n_charts, frames)
     use_r = np.zeros(n_charts, dtype=bool)
-    if refine == "arap":
+    if refine in ("arap", "slim"):
         uv_r, steps = _arap_charts(
             Vn, F, uv, vert_chart, vstart, n_charts, iterations=refine_iterations,
             inv_frames=frames,
@@ -1329,6 +1341,17 @@ def solve_charts(
             )
             q = {k: np.where(use_r, q_r[k], q[k]) for k in q}
             uv = np.where(use_r[vert_chart][:, None], uv_r, uv)
+    if refine == "slim":
+        go = (q["n_flipped"] == 0) & (q["n_degenerate"] == 0)  # others: energy infinite
+        uv_s, moved = slim_refine(
+            Vn, F, uv, vert_chart=vert_chart, n_charts=n_charts, inv_frames=frames, charts=go
+        )
+        if moved.any():
+            q_s = charts_quality(Vn, F, uv_s, vert_chart, n_charts, frames)
+            use_s = (moved > 0) & q_s["bijective"]
+            q = {k: np.where(use_s, q_s[k], q[k]) for k in q}
+            uv = np.where(use_s[vert_chart][:, None], uv_s, uv)
+            use_r |= use_s
     low = np.minimum.reduceat(uv, vstart, axis=0)
     uv = (uv - low[vert_chart]) * scale[vert_chart][:, None]
     return ChartMaps(uv=uv, quality=q, refined=use_r, eigenvalues=values)

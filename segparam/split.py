@@ -50,6 +50,7 @@ from .parameterize import (
     MAX_EXTEND,
     METHODS,
     MIN_POINTS,
+    REFINES,
     TANGENTS,
     charts_quality,
     parameterize_chart,
@@ -96,6 +97,9 @@ class SplitConfig:
     n_jobs : int
         Worker processes for meshes of at least ``PARALLEL_MIN_FACES`` faces (0: one per CPU,
         1: none). Charts are independent, so the result does not depend on it.
+    refine : {"slim", "arap", "none"}
+        The refinement after the solver (see :func:`segparam.parameterize.parameterize_chart`):
+        ``"none"`` keeps the paper's map.
 
     Raises
     ------
@@ -110,6 +114,7 @@ class SplitConfig:
     max_distortion: float | None = None
     min_faces: int = 8
     n_jobs: int = 0
+    refine: str = "arap"
 
     def __post_init__(self) -> None:
         # Every field, type first (bool is not a number here); numbers are stored as plain
@@ -123,6 +128,7 @@ class SplitConfig:
             ),
             "min_faces": check_int("min_faces", self.min_faces, low=1),
             "n_jobs": check_int("n_jobs", self.n_jobs, low=0),
+            "refine": check_choice("refine", self.refine, REFINES),
         }
         for name, value in checked.items():
             object.__setattr__(self, name, value)
@@ -550,7 +556,7 @@ def _bulk_charts(
     if len(take):
         Vs, Fs, vc = part(take)
         try:
-            maps = solve_charts(Vs, Fs, vc, tangent=cfg.tangent)
+            maps = solve_charts(Vs, Fs, vc, tangent=cfg.tangent, refine=cfg.refine)
         except (InvalidMeshError, np.linalg.LinAlgError) as exc:  # not expected: one by one
             log.debug("batched solver failed (%s); solving %d charts one by one", exc, len(take))
             return out
@@ -618,7 +624,7 @@ def _try_piece(
                 return Chart(faces, vertices, local_F, uv, quality, src, depth, "planar")
         try:
             result = parameterize_chart(
-                Vl, local_F, method=cfg.method, tangent=cfg.tangent, seed=seed
+                Vl, local_F, method=cfg.method, tangent=cfg.tangent, seed=seed, refine=cfg.refine
             )
         except InvalidMeshError as exc:  # not a disk (e.g. a half that pinches): split it
             log.debug("chart %d depth %d: %s", src, depth, exc)

@@ -65,6 +65,7 @@ BAD = {
     ("split", "max_distortion"): (["3", True], [0.5, 0, math.inf, math.nan]),
     ("split", "min_faces"): ([8.5, True], [0, -1]),
     ("split", "n_jobs"): ([True, "2", 1.0], [-1]),
+    ("split", "refine"): ([1, True], ["SLIM", "lbfgs"]),
     ("pack", "resolution"): ([1024.0, True, "1024"], [0, -1, 16385]),
     ("pack", "padding"): ([2.0, True, "2"], [-1]),
     ("pack", "method"): ([1, True], ["skyline", "Raster"]),
