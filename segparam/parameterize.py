@@ -37,7 +37,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components as graph_components
 from scipy.spatial import cKDTree
 
-from .errors import InvalidMeshError, check_choice, check_int
+from .errors import InvalidMeshError, check_choice, check_int, check_number
 from .linalg import smallest_eigenpairs, spd_solver
 from .mesh import (
     boundary_edges,
@@ -61,7 +61,7 @@ from .quality import (
     singular_values,
     triangle_frames,
 )
-from .refine import slim_refine
+from .refine import ANGLE_WEIGHT, slim_refine
 
 log = logging.getLogger(__name__)
 
@@ -770,7 +770,12 @@ class HessianSolver:
         self.assemble_seconds = time.perf_counter() - t0
 
     def solve(
-        self, *, seed: int = 0, refine: str = "arap", refine_iterations: int = 10
+        self,
+        *,
+        seed: int = 0,
+        refine: str = "arap",
+        refine_iterations: int = 10,
+        angle_weight: float = ANGLE_WEIGHT,
     ) -> ChartMap:
         """Eigenvectors of ``K``, isometric 2x2 fit, orientation, optional refinement, quality.
 
@@ -778,12 +783,14 @@ class HessianSolver:
         unless it is worse: it is kept when it is bijective, or when neither map is and it has
         fewer flipped triangles. A map that is already rigid (see :func:`arap_refine`) is not
         refined. ``refine="slim"`` then lowers the symmetric Dirichlet energy of a map with no
-        flipped triangle (:func:`segparam.refine.slim_refine`), kept when bijective.
+        flipped triangle (:func:`segparam.refine.slim_refine`; ``angle_weight`` trades stretch
+        for angle distortion), kept when bijective.
         ``refine="none"`` returns the paper's map as it is.
         """
         seed = check_int("seed", seed, low=0)
         refine = check_choice("refine", refine, REFINES)
         refine_iterations = check_int("refine_iterations", refine_iterations, low=0)
+        angle_weight = check_number("angle_weight", angle_weight, low=0)
         t0 = time.perf_counter()
         guess = np.column_stack([np.ones(len(self._Vn)), self._Vn])
         Y, values = hessian_eigenmap(self.K, seed=seed, guess=guess)
@@ -809,7 +816,9 @@ class HessianSolver:
         if quality is None:
             quality = chart_quality(self._Vn, self.F, uv, frames)
         if refine == "slim" and quality.n_flipped == 0 and quality.n_degenerate == 0:
-            uv_s, moved = slim_refine(self._Vn, self.F, uv, inv_frames=frames)
+            uv_s, moved = slim_refine(
+                self._Vn, self.F, uv, inv_frames=frames, angle_weight=angle_weight
+            )
             q_s = chart_quality(self._Vn, self.F, uv_s, frames) if moved[0] else None
             if q_s is not None and q_s.bijective:
                 uv, quality, refined = uv_s, q_s, True
@@ -841,6 +850,7 @@ def parameterize_chart(
     min_points: int = MIN_POINTS,
     n_neighbors: int = 12,
     refine: str = "arap",
+    angle_weight: float = ANGLE_WEIGHT,
 ) -> ChartMap:
     """Map one disk-like chart to the plane with the Hessian-eigenfunction solver.
 
@@ -864,6 +874,10 @@ def parameterize_chart(
         they do not make the map worse (:meth:`HessianSolver.solve`); ``"slim"``: the same, then
         the flip-free symmetric Dirichlet refinement (:mod:`segparam.refine`), kept when
         bijective; ``"none"``: the paper's map.
+    angle_weight : float
+        ``refine="slim"`` only: weight (>= 0) of the conformal term added to the symmetric
+        Dirichlet energy (:func:`segparam.refine.slim_refine`); higher trades L2 stretch for
+        less angle distortion.
 
     Returns
     -------
@@ -887,7 +901,7 @@ def parameterize_chart(
     solver = HessianSolver(
         V, F, method=method, tangent=tangent, min_points=min_points, n_neighbors=n_neighbors
     )
-    return solver.solve(seed=seed, refine=refine)
+    return solver.solve(seed=seed, refine=refine, angle_weight=angle_weight)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1278,6 +1292,7 @@ def solve_charts(
     tangent: str = "normals",
     refine: str = "arap",
     refine_iterations: int = 10,
+    angle_weight: float = ANGLE_WEIGHT,
 ) -> ChartMaps:
     """``HessianSolver(V_c, F_c, tangent=tangent).solve(refine=...)`` for every chart ``c`` of a
     disjoint union of small charts, all at once.
@@ -1307,6 +1322,7 @@ def solve_charts(
     tangent = check_choice("tangent", tangent, TANGENTS)
     refine = check_choice("refine", refine, REFINES)
     refine_iterations = check_int("refine_iterations", refine_iterations, low=0)
+    angle_weight = check_number("angle_weight", angle_weight, low=0)
     vert_chart = np.asarray(vert_chart, dtype=np.int64)
     n_charts = int(vert_chart[-1]) + 1
     size = np.bincount(vert_chart, minlength=n_charts)
@@ -1344,8 +1360,9 @@ def solve_charts(
     if refine == "slim":
         go = (q["n_flipped"] == 0) & (q["n_degenerate"] == 0)  # others: energy infinite
         uv_s, moved = slim_refine(
-            Vn, F, uv, vert_chart=vert_chart, n_charts=n_charts, inv_frames=frames, charts=go
-        )
+            Vn, F, uv, vert_chart=vert_chart, n_charts=n_charts, inv_frames=frames, charts=go,
+            angle_weight=angle_weight,
+        )  # fmt: skip
         if moved.any():
             q_s = charts_quality(Vn, F, uv_s, vert_chart, n_charts, frames)
             use_s = (moved > 0) & q_s["bijective"]

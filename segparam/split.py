@@ -58,6 +58,7 @@ from .parameterize import (
     solve_charts,
 )
 from .quality import ChartQuality, chart_quality
+from .refine import ANGLE_WEIGHT
 from .segment import divide, face_affinity
 
 log = logging.getLogger(__name__)
@@ -100,6 +101,9 @@ class SplitConfig:
     refine : {"slim", "arap", "none"}
         The refinement after the solver (see :func:`segparam.parameterize.parameterize_chart`):
         ``"none"`` keeps the paper's map.
+    angle_weight : float
+        ``refine="slim"``: weight (finite, >= 0) of the conformal term in the refined energy;
+        higher trades L2 stretch for less angle distortion (:func:`segparam.refine.slim_refine`).
 
     Raises
     ------
@@ -115,6 +119,7 @@ class SplitConfig:
     min_faces: int = 8
     n_jobs: int = 0
     refine: str = "arap"
+    angle_weight: float = ANGLE_WEIGHT
 
     def __post_init__(self) -> None:
         # Every field, type first (bool is not a number here); numbers are stored as plain
@@ -129,6 +134,7 @@ class SplitConfig:
             "min_faces": check_int("min_faces", self.min_faces, low=1),
             "n_jobs": check_int("n_jobs", self.n_jobs, low=0),
             "refine": check_choice("refine", self.refine, REFINES),
+            "angle_weight": check_number("angle_weight", self.angle_weight, low=0),
         }
         for name, value in checked.items():
             object.__setattr__(self, name, value)
@@ -556,7 +562,9 @@ def _bulk_charts(
     if len(take):
         Vs, Fs, vc = part(take)
         try:
-            maps = solve_charts(Vs, Fs, vc, tangent=cfg.tangent, refine=cfg.refine)
+            maps = solve_charts(
+                Vs, Fs, vc, tangent=cfg.tangent, refine=cfg.refine, angle_weight=cfg.angle_weight
+            )
         except (InvalidMeshError, np.linalg.LinAlgError) as exc:  # not expected: one by one
             log.debug("batched solver failed (%s); solving %d charts one by one", exc, len(take))
             return out
@@ -624,8 +632,9 @@ def _try_piece(
                 return Chart(faces, vertices, local_F, uv, quality, src, depth, "planar")
         try:
             result = parameterize_chart(
-                Vl, local_F, method=cfg.method, tangent=cfg.tangent, seed=seed, refine=cfg.refine
-            )
+                Vl, local_F, method=cfg.method, tangent=cfg.tangent, seed=seed, refine=cfg.refine,
+                angle_weight=cfg.angle_weight,
+            )  # fmt: skip
         except InvalidMeshError as exc:  # not a disk (e.g. a half that pinches): split it
             log.debug("chart %d depth %d: %s", src, depth, exc)
             return None

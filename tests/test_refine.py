@@ -61,8 +61,11 @@ def tube(n_around=48, n_along=16, *, radius=1.0, length=3.0, r_top=None):
     shear=st.floats(-0.8, 0.8),
     squash=st.floats(0.3, 3.0),
     noise=st.floats(0.0, 0.3),
+    weight=st.sampled_from([0.0, 4.0, 16.0]),
 )
-def test_refinement_never_flips_and_never_raises_the_energy(seed, height, shear, squash, noise):
+def test_refinement_never_flips_and_never_raises_the_energy(
+    seed, height, shear, squash, noise, weight
+):
     """Random small charts (bumpy grids) from random distorted flip-free starting maps."""
     rng = np.random.default_rng(seed)
     V, F = tri_grid(7, 7)
@@ -72,10 +75,10 @@ def test_refinement_never_flips_and_never_raises_the_energy(seed, height, shear,
     uv = uv + noise * rng.uniform(-0.5, 0.5, uv.shape)
     if (signed_areas(uv, F) <= 0).any():  # the start must be flip-free
         uv = V[:, :2] @ np.array([[1.0, shear], [0.0, squash]]).T
-    e0 = symmetric_dirichlet(V, F, uv)
-    out, steps = slim_refine(V, F, uv)
+    e0 = symmetric_dirichlet(V, F, uv, angle_weight=weight)
+    out, steps = slim_refine(V, F, uv, angle_weight=weight)
     assert (signed_areas(out, F) > 0).all()
-    assert symmetric_dirichlet(V, F, out) <= e0
+    assert symmetric_dirichlet(V, F, out, angle_weight=weight) <= e0
     assert steps.shape == (1,)
 
 
@@ -84,7 +87,7 @@ def test_a_distorted_developable_chart_returns_to_an_isometry():
         Vn, uv = normalized_map(V, F)
         start = uv @ np.array([[0.6, 0.3], [0.0, 1.5]]).T
         assert symmetric_dirichlet(Vn, F, start) > 4.5
-        out, steps = slim_refine(Vn, F, start)
+        out, steps = slim_refine(Vn, F, start, angle_weight=0.0)
         assert steps[0] > 0
         assert symmetric_dirichlet(Vn, F, out) < 4.001
         q = chart_quality(Vn, F, out)
@@ -127,9 +130,19 @@ def test_refining_charts_together_equals_one_by_one():
 def test_slim_lowers_the_energy_of_a_curved_chart_and_stays_bijective():
     V, F = saddle(25, 25, k=2.0)
     arap = parameterize_chart(V, F, refine="arap")
-    slim = parameterize_chart(V, F, refine="slim")
+    slim = parameterize_chart(V, F, refine="slim", angle_weight=0.0)
     assert slim.bijective and slim.refined
     assert slim.quality.symmetric_dirichlet < arap.quality.symmetric_dirichlet
+
+
+def test_the_angle_weight_trades_stretch_for_angle_distortion():
+    V, F = saddle(25, 25, k=2.0)
+    q = [parameterize_chart(V, F, refine="slim", angle_weight=w).quality for w in (0, 4, 16)]
+    assert all(x.bijective for x in q)
+    assert q[0].angle_distortion > q[1].angle_distortion > q[2].angle_distortion
+    assert q[0].l2_stretch < q[2].l2_stretch
+    with pytest.raises(ConfigError):
+        parameterize_chart(V, F, refine="slim", angle_weight=-1)
 
 
 def test_refine_none_is_the_papers_map_and_bad_choices_are_refused():
@@ -149,7 +162,7 @@ def test_batched_solver_refines_with_slim_too():
     F = np.vstack([c[1] + o for c, o in zip(caps, offs, strict=True)])
     vc = np.repeat(np.arange(3), [len(c[0]) for c in caps])
     arap = solve_charts(V, F, vc, refine="arap")
-    slim = solve_charts(V, F, vc, refine="slim")
+    slim = solve_charts(V, F, vc, refine="slim", angle_weight=0.0)
     assert slim.quality["bijective"].all()
     assert (
         slim.quality["symmetric_dirichlet"] <= arap.quality["symmetric_dirichlet"] + 1e-12
