@@ -1,20 +1,21 @@
-"""Charts against stretch: segparam's distortion target swept, with xatlas's point beside it.
+"""Charts against stretch: segparam's stretch target swept, with xatlas's point beside it.
 
-The knob is ``[split] max_distortion`` (:class:`segparam.split.SplitConfig`): a bijective chart
-whose angle distortion (area-weighted mean ``s1 / s2``) exceeds it is bisected along its Fiedler
-vector and both halves mapped again. Lower targets give more charts and less distortion. For each
+The knob is ``[split] max_stretch`` (:class:`segparam.split.SplitConfig`): a bijective chart
+whose L2 stretch (Sander's) exceeds it is bisected along its Fiedler vector and both halves
+mapped again. Lower targets give more charts and less stretch. Every other setting is the
+default (``[split] refine`` and ``angle_weight`` from ``--refine`` / ``--angle-weight``). For each
 mesh and target this prints and records charts, utilization, L2 stretch, angle distortion, seam
 length / sqrt(area) and wall seconds (the figures of ``benchmarks/bench_atlas.py``, computed the
 same way from the atlas' uvs), then xatlas's row (defaults, 1024 texels, padding 2) and draws
 the curve per mesh: charts against L2 stretch and against angle distortion, xatlas as a cross.
 
 Meshes (``--only`` picks some): ``brain-20k``, ``fsaverage5-pial``, ``icosphere``, ``torus``
-(built as in ``bench_atlas.py``). Remeshing off, seed 0, ``--refine`` sets ``[split] refine``.
+(built as in ``bench_atlas.py``). Remeshing off, seed 0.
 
 Usage::
 
-    python benchmarks/bench_quality.py [--only NAME ...] [--targets none 1.2 1.1 ...]
-        [--refine arap|slim|none] [--out benchmarks/results/quality.json]
+    python benchmarks/bench_quality.py [--only NAME ...] [--targets none 1.02 1.01 ...]
+        [--refine slim|arap|none] [--angle-weight W] [--out benchmarks/results/quality.json]
         [--plot benchmarks/results/quality.png]
 """
 
@@ -34,16 +35,16 @@ from PIL import Image, ImageDraw
 sys.path.insert(0, str(Path(__file__).parent))
 import bench_atlas as B  # noqa: E402  (the meshes and measures, shared)
 
+from segparam.parameterize import REFINES  # noqa: E402
 from segparam.pipeline import PipelineConfig, build_atlas  # noqa: E402
+from segparam.split import SplitConfig  # noqa: E402
 
 MESHES = ("brain-20k", "fsaverage5-pial", "icosphere", "torus")
-TARGETS = ("none", "1.3", "1.2", "1.15", "1.1", "1.05")
+TARGETS = ("none", "1.05", "1.02", "1.01", "1.005")
 
 
-def run(V: np.ndarray, F: np.ndarray, target: float | None, refine: str) -> dict:
-    cfg = PipelineConfig().replace(
-        remesh={"mode": "off"}, split={"max_distortion": target, "refine": refine}
-    )
+def run(V: np.ndarray, F: np.ndarray, target: float | None, split: dict) -> dict:
+    cfg = PipelineConfig().replace(remesh={"mode": "off"}, split={"max_stretch": target, **split})
     t0 = time.perf_counter()
     a = build_atlas(V, F, cfg, seed=0)
     row = {"tool": "segparam", "target": target, "seconds": time.perf_counter() - t0}
@@ -95,9 +96,12 @@ def plot(rows: list[dict], path: Path) -> None:
             pts = [px(r["charts"], r[key]) for r in seg]
             if len(pts) > 1:
                 d.line(pts, fill=(30, 90, 200), width=2)
-            for r, (u, v) in zip(seg, pts, strict=True):
+            labels: dict[tuple, list[str]] = {}  # targets that give the same point share a label
+            for r, p in zip(seg, pts, strict=True):
+                labels.setdefault((round(p[0]), round(p[1])), []).append(f"{r['target'] or 'none'}")
+            for (u, v), names in labels.items():
                 d.ellipse([u - 3, v - 3, u + 3, v + 3], fill=(30, 90, 200))
-                d.text((u + 4, v - 12), f"{r['target'] or 'none'}", fill=(30, 90, 200))
+                d.text((u + 4, v - 12), ",".join(names), fill=(30, 90, 200))
             for r in xa:
                 u, v = px(r["charts"], r[key])
                 d.line([u - 5, v - 5, u + 5, v + 5], fill=(200, 40, 40), width=2)
@@ -111,13 +115,15 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", nargs="+", default=None, metavar="NAME", choices=MESHES)
     ap.add_argument("--targets", nargs="+", default=list(TARGETS), metavar="X")
-    ap.add_argument("--refine", default="arap", choices=("slim", "arap", "none"))
+    ap.add_argument("--refine", default=SplitConfig.refine, choices=REFINES)
+    ap.add_argument("--angle-weight", type=float, default=SplitConfig.angle_weight)
     ap.add_argument("--out", default="benchmarks/results/quality.json")
     ap.add_argument("--plot", default="benchmarks/results/quality.png")
     args = ap.parse_args()
     targets = [None if t == "none" else float(t) for t in args.targets]
+    split = {"refine": args.refine, "angle_weight": args.angle_weight}
     V, F = B.brain_like_surface(500)  # warm-up: numba kernels, lazy imports
-    run(V, F, None, args.refine)
+    run(V, F, None, split)
     print(f"{'mesh':16s} {'target':>7s} {'charts':>6s} {'util':>6s} {'L2':>7s} {'angle':>7s} "
           f"{'seam':>7s} {'sec':>7s} {'valid':>5s}")  # fmt: skip
     rows = []
@@ -130,7 +136,7 @@ def main() -> None:
         V, F = np.asarray(V, dtype=np.float64), np.asarray(F, dtype=np.int64)
         for target in targets:
             r = {"mesh": name, "faces": len(F)}
-            r.update(run(V, F, target, args.refine))
+            r.update(run(V, F, target, split))
             show(r)
             rows.append(r)
         r = {"mesh": name, "faces": len(F)}
@@ -140,9 +146,9 @@ def main() -> None:
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     result = {
-        "benchmark": "quality: charts vs stretch, [split] max_distortion swept, xatlas beside",
+        "benchmark": "quality: charts vs stretch, [split] max_stretch swept, xatlas beside",
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
-        "refine": args.refine,
+        "split": split,
         "rows": rows,
     }
     out.write_text(json.dumps(B._json_ready(result), indent=2) + "\n")
