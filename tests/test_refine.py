@@ -15,7 +15,7 @@ from segparam.parameterize import HessianSolver, parameterize_chart, solve_chart
 from segparam.pipeline import PipelineConfig, build_atlas
 from segparam.quality import chart_quality, distortion, seam_length, signed_areas
 from segparam.refine import slim_refine, symmetric_dirichlet
-from segparam.split import SplitConfig
+from segparam.split import STRETCH_MIN_FACES, SplitConfig
 
 FAST = PipelineConfig().replace(pack={"resolution": 512}, remesh={"mode": "off"})
 #: Sander's L2 stretch of the Lambert azimuthal equal-area map of a hemisphere: radial and
@@ -223,3 +223,20 @@ def test_seam_length_of_a_square_cut_in_two():
     uv_F = np.where(left[:, None], F, F + 81)
     assert seam_length(V, F, uv_F, uv_vertex) == pytest.approx(1.0)
     assert seam_length(V, F, F, np.arange(81)) == pytest.approx(0.0)
+
+
+@pytest.mark.slow
+def test_the_stretch_target_trades_charts_for_stretch():
+    m = trimesh.creation.icosphere(2)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    out = []
+    for target in (None, 1.02, 1.005):
+        a = build_atlas(V, F, FAST.replace(split={"max_stretch": target}), seed=0)
+        d = distortion(a.V[a.uv_vertex], a.uv_F, a.uv)
+        assert all(c.quality.bijective for c in a.charts.charts)
+        out.append((a.n_charts, d["l2_stretch"]))
+        if target is not None:  # every chart big enough to be split meets the target
+            big = [c for c in a.charts.charts if len(c.faces) >= STRETCH_MIN_FACES]
+            assert all(c.quality.l2_stretch <= target for c in big)
+    (c0, l0), (c1, l1), (c2, l2) = out
+    assert c0 < c1 <= c2 and l0 > l1 >= l2
