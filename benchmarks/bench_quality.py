@@ -6,8 +6,10 @@ mapped again. Lower targets give more charts and less stretch. Every other setti
 default (``[split] refine`` and ``angle_weight`` from ``--refine`` / ``--angle-weight``). For each
 mesh and target this prints and records charts, utilization, L2 stretch, angle distortion, seam
 length / sqrt(area) and wall seconds (the figures of ``benchmarks/bench_atlas.py``, computed the
-same way from the atlas' uvs), then xatlas's row (defaults, 1024 texels, padding 2) and draws
-the curve per mesh: charts against L2 stretch and against angle distortion, xatlas as a cross.
+same way from the atlas' uvs) and the parameterize stage's seconds, then a row with the
+previous defaults (``refine="arap"``, no target: ``arap``), then xatlas's row (defaults, 1024
+texels, padding 2), and draws the curve per mesh: charts against L2 stretch and against angle
+distortion, the previous defaults as a grey square, xatlas as a red cross.
 
 Meshes (``--only`` picks some): ``brain-20k``, ``fsaverage5-pial``, ``icosphere``, ``torus``
 (built as in ``bench_atlas.py``). Remeshing off, seed 0.
@@ -43,21 +45,23 @@ MESHES = ("brain-20k", "fsaverage5-pial", "icosphere", "torus")
 TARGETS = ("none", "1.05", "1.02", "1.01", "1.005")
 
 
-def run(V: np.ndarray, F: np.ndarray, target: float | None, split: dict) -> dict:
+def run(V: np.ndarray, F: np.ndarray, target: float | None, split: dict, tool="segparam") -> dict:
     cfg = PipelineConfig().replace(remesh={"mode": "off"}, split={"max_stretch": target, **split})
     t0 = time.perf_counter()
     a = build_atlas(V, F, cfg, seed=0)
-    row = {"tool": "segparam", "target": target, "seconds": time.perf_counter() - t0}
+    row = {"tool": tool, "target": target, "seconds": time.perf_counter() - t0}
     row.update(B.measures(a.V, a.F, a.uv, a.uv_F, a.uv_vertex, a.chart_of_face))
     row["stages"] = {k: round(v, 3) for k, v in a.timings.items()}
     return row
 
 
 def show(r: dict) -> None:
-    t = "xatlas" if r["tool"] == "xatlas" else f"{r['target'] or 'none'}"
+    t = r["tool"] if r["tool"] != "segparam" else f"{r['target'] or 'none'}"
+    param = r.get("stages", {}).get("parameterize")
     print(
         f"{r['mesh']:16s} {t:>7s} {r['charts']:6d} {r['utilization']:6.3f} {r['l2_stretch']:7.4f} "
         f"{r['angle_distortion']:7.4f} {r['seam']:7.2f} {r['seconds']:7.2f} "
+        f"{'-' if param is None else format(param, '.2f'):>6s} "
         f"{'yes' if r['flipped'] == 0 and r['overlap_texels'] == 0 else 'no':>5s}",
         flush=True,
     )
@@ -70,10 +74,11 @@ def plot(rows: list[dict], path: Path) -> None:
     img = Image.new("RGB", (2 * W, H * len(meshes)), "white")
     d = ImageDraw.Draw(img)
     for i, mesh in enumerate(meshes):
-        seg = sorted((r for r in rows if r["mesh"] == mesh and r["tool"] != "xatlas"),
+        seg = sorted((r for r in rows if r["mesh"] == mesh and r["tool"] == "segparam"),
                      key=lambda r: r["charts"])  # fmt: skip
         xa = [r for r in rows if r["mesh"] == mesh and r["tool"] == "xatlas"]
-        allr = seg + xa
+        old = [r for r in rows if r["mesh"] == mesh and r["tool"] == "arap"]
+        allr = seg + xa + old
         xs = np.log10([max(r["charts"], 1) for r in allr])
         x0, x1 = xs.min() - 0.1, xs.max() + 0.1
         for j, key in enumerate(("l2_stretch", "angle_distortion")):
@@ -102,6 +107,10 @@ def plot(rows: list[dict], path: Path) -> None:
             for (u, v), names in labels.items():
                 d.ellipse([u - 3, v - 3, u + 3, v + 3], fill=(30, 90, 200))
                 d.text((u + 4, v - 12), ",".join(names), fill=(30, 90, 200))
+            for r in old:
+                u, v = px(r["charts"], r[key])
+                d.rectangle([u - 4, v - 4, u + 4, v + 4], outline=(110, 110, 110), width=2)
+                d.text((u + 6, v + 2), "arap", fill=(110, 110, 110))
             for r in xa:
                 u, v = px(r["charts"], r[key])
                 d.line([u - 5, v - 5, u + 5, v + 5], fill=(200, 40, 40), width=2)
@@ -125,7 +134,7 @@ def main() -> None:
     V, F = B.brain_like_surface(500)  # warm-up: numba kernels, lazy imports
     run(V, F, None, split)
     print(f"{'mesh':16s} {'target':>7s} {'charts':>6s} {'util':>6s} {'L2':>7s} {'angle':>7s} "
-          f"{'seam':>7s} {'sec':>7s} {'valid':>5s}")  # fmt: skip
+          f"{'seam':>7s} {'sec':>7s} {'param':>6s} {'valid':>5s}")  # fmt: skip
     rows = []
     for name in args.only or MESHES:
         try:
@@ -139,6 +148,10 @@ def main() -> None:
             r.update(run(V, F, target, split))
             show(r)
             rows.append(r)
+        r = {"mesh": name, "faces": len(F)}
+        r.update(run(V, F, None, {"refine": "arap"}, tool="arap"))
+        show(r)
+        rows.append(r)
         r = {"mesh": name, "faces": len(F)}
         r.update(B.run_xatlas(V, F))
         show(r)
