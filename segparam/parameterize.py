@@ -61,7 +61,7 @@ from .quality import (
     singular_values,
     triangle_frames,
 )
-from .refine import ANGLE_WEIGHT, slim_refine
+from .refine import ANGLE_WEIGHT, MAX_STRETCH_INCREASE, SMALL_CHART_FACES, slim_refine
 
 log = logging.getLogger(__name__)
 
@@ -784,7 +784,9 @@ class HessianSolver:
         fewer flipped triangles. A map that is already rigid (see :func:`arap_refine`) is not
         refined. ``refine="slim"`` then lowers the symmetric Dirichlet energy of a map with no
         flipped triangle (:func:`segparam.refine.slim_refine`; ``angle_weight`` trades stretch
-        for angle distortion), kept when bijective.
+        for angle distortion), kept when bijective (and, on charts of fewer than
+        ``SMALL_CHART_FACES`` faces, when its L2 stretch is at most ``MAX_STRETCH_INCREASE``
+        above the map's before).
         ``refine="none"`` returns the paper's map as it is.
         """
         seed = check_int("seed", seed, low=0)
@@ -820,7 +822,14 @@ class HessianSolver:
                 self._Vn, self.F, uv, inv_frames=frames, angle_weight=angle_weight
             )
             q_s = chart_quality(self._Vn, self.F, uv_s, frames) if moved[0] else None
-            if q_s is not None and q_s.bijective:
+            if (
+                q_s is not None
+                and q_s.bijective
+                and (
+                    len(self.F) >= SMALL_CHART_FACES
+                    or q_s.l2_stretch <= quality.l2_stretch + MAX_STRETCH_INCREASE
+                )
+            ):
                 uv, quality, refined = uv_s, q_s, True
         t3 = time.perf_counter()
         return ChartMap(
@@ -1365,7 +1374,14 @@ def solve_charts(
         )  # fmt: skip
         if moved.any():
             q_s = charts_quality(Vn, F, uv_s, vert_chart, n_charts, frames)
-            use_s = (moved > 0) & q_s["bijective"]
+            use_s = (
+                (moved > 0)
+                & q_s["bijective"]
+                & (
+                    (n_faces >= SMALL_CHART_FACES)
+                    | (q_s["l2_stretch"] <= q["l2_stretch"] + MAX_STRETCH_INCREASE)
+                )
+            )
             q = {k: np.where(use_s, q_s[k], q[k]) for k in q}
             uv = np.where(use_s[vert_chart][:, None], uv_s, uv)
             use_r |= use_s

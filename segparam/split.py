@@ -58,7 +58,7 @@ from .parameterize import (
     solve_charts,
 )
 from .quality import ChartQuality, chart_quality
-from .refine import ANGLE_WEIGHT
+from .refine import ANGLE_WEIGHT, SMALL_CHART_FACES
 from .segment import divide, face_affinity
 
 log = logging.getLogger(__name__)
@@ -73,8 +73,9 @@ __all__ = ["Chart", "ChartSet", "SplitConfig", "parameterize_charts", "project_c
 MAX_STRETCH = 1.02
 #: Charts with fewer faces are not split for stretch: they are the pieces of small curved parts
 #: (the 40-face halves of 80-face spheres), which a split flattens only a little, at a solver
-#: call per piece: on 300 such spheres the target took the stage from 1.5 to 60+ s.
-STRETCH_MIN_FACES = 64
+#: call per piece: on 300 such spheres the target took the stage from 1.5 to 60+ s. The
+#: refinement keeps their stretch instead (:data:`segparam.refine.SMALL_CHART_FACES`).
+STRETCH_MIN_FACES = SMALL_CHART_FACES
 #: Smaller meshes are parameterized in this process: starting workers costs about a second.
 PARALLEL_MIN_FACES = 100_000
 #: A chart is planar when no unit face normal differs from the first by more than this.
