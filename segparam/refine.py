@@ -41,7 +41,7 @@ import scipy.sparse as sp
 
 from .linalg import spd_solver
 from .mesh import face_areas
-from .quality import inverse_frames, jacobians, triangle_frames
+from .quality import inverse_frames, jacobians, singular_values, triangle_frames
 
 __all__ = [
     "ANGLE_WEIGHT",
@@ -224,6 +224,8 @@ def slim_refine(
     total = np.bincount(fc, weights=area, minlength=n_charts)
     total = np.where(total > 0, total, 1.0)
     D = _gradient_rows(F, frames, n)
+    g3 = _gradient_coefficients(frames)  # (m, 2, 3)
+    local = np.einsum("mki,mkj->mij", g3, g3)  # sum_k g_k g_k^T: the triangle's stiffness
 
     def energy(x: np.ndarray) -> np.ndarray:
         e = area * _energy_terms(jacobians(V, F, x, frames), angle_weight)
@@ -244,18 +246,16 @@ def slim_refine(
             break
         faces = np.flatnonzero(active[fc])
         J = jacobians(V, F[faces], uv, frames[faces])
-        U, S, _ = np.linalg.svd(J)
-        w2 = (S + 1) * (S * S + 1) / S**3  # SLIM's squared weights for the symmetric Dirichlet
-        W2 = (U * w2[:, None, :]) @ U.transpose(0, 2, 1)  # W^T W = U diag(w^2) U^T
-        H = _proxy_matrix(D, faces, area, W2)
+        W2 = _slim_weights(J)
         g = _energy_gradients(J, angle_weight) * area[faces][:, None, None]
         grad = np.concatenate([_scatter_rows(D, faces, g[:, i, :]) for i in range(2)])
         move = active[vc] & ~pin
         free = np.concatenate([move, move])
+        H = _proxy_matrix(F[faces], local[faces] * area[faces][:, None, None], W2, free)
         # SLIM's proxy sum A ||W (J - R)||^2 has gradient 2 (H x - rhs) = grad E, so its
         # minimiser is x - H^-1 grad E / 2; pinned vertices stay
         delta = np.zeros(2 * n)
-        delta[free] = -0.5 * spd_solver(H[free][:, free])(grad[free])
+        delta[free] = -0.5 * spd_solver(H)(grad[free])
         d = np.stack([delta[:n], delta[n:]], axis=1)
         tau_max = _segment_min(fc[faces], _step_bound(uv, d, F[faces]), n_charts)
         tau = np.where(active, np.minimum(1.0, STEP_FRACTION * tau_max), 0.0)
@@ -281,24 +281,46 @@ def slim_refine(
     return uv, steps
 
 
+def _slim_weights(J: np.ndarray) -> np.ndarray:
+    """``W^T W = U diag(w(s1)^2, w(s2)^2) U^T`` per Jacobian ``J = U S V^T`` (det J > 0), with
+    SLIM's symmetric Dirichlet weights ``w(s)^2 = (s + 1)(s^2 + 1) / s^3``, in closed form:
+    ``w2^2 I + (w1^2 - w2^2) u1 u1^T``, ``u1`` the leading eigenvector of ``J J^T``."""
+    s1, s2 = singular_values(J)
+    w1, w2 = ((s + 1) * (s * s + 1) / s**3 for s in (s1, s2))
+    JJ = J @ J.transpose(0, 2, 1)
+    theta = 0.5 * np.arctan2(2 * JJ[:, 0, 1], JJ[:, 0, 0] - JJ[:, 1, 1])
+    u = np.stack([np.cos(theta), np.sin(theta)], axis=1)
+    return w2[:, None, None] * np.eye(2) + (w1 - w2)[:, None, None] * u[:, :, None] * u[:, None, :]
+
+
 def _proxy_matrix(
-    D: sp.csr_matrix, faces: np.ndarray, area: np.ndarray, W2: np.ndarray
+    F: np.ndarray, stiffness: np.ndarray, W2: np.ndarray, free: np.ndarray
 ) -> sp.csc_matrix:
     """Quadratic part ``H`` of SLIM's proxy ``sum_t A_t ||W_t (J_t - R_t)||_F^2`` over the stacked
-    ``x = (u, v)`` (the proxy is ``x^T H x - 2 rhs^T x + const``).
+    ``x = (u, v)`` (the proxy is ``x^T H x - 2 rhs^T x + const``), rows and columns ``free`` only.
 
-    Column ``k`` of ``J_t`` is ``c = (D_k u, D_k v)`` (row ``2t + k`` of ``D``) and the term is
-    ``sum_k (c - R e_k)^T W^T W (c - R e_k)``: the ``(u, u)``, ``(u, v)``, ``(v, v)`` blocks of
-    ``H`` are Laplacians ``D^T diag(A (W^T W)_ij) D``. ``W2 = W^T W`` for the triangles ``faces``.
+    Column ``k`` of ``J_t`` is ``c_k = (g_k . u_t, g_k . v_t)`` (``g_k`` the triangle's gradient
+    coefficients, ``u_t`` its corners' values) and the term is ``sum_k (c_k - R e_k)^T W^T W
+    (c_k - R e_k)``: block ``(a, b)`` of ``H`` gathers ``A_t (W^T W)_ab sum_k g_k g_k^T``, the
+    triangle's ``stiffness`` (given times ``A_t``) scaled by one weight, assembled from COO
+    triplets.
     """
-    rows = (2 * faces[:, None] + np.arange(2)).ravel()
-    Dk = D[rows]
-    a = np.repeat(area[faces], 2)
-    blocks = {
-        ij: Dk.T @ sp.diags(a * np.repeat(W2[:, ij[0], ij[1]], 2)) @ Dk
-        for ij in ((0, 0), (0, 1), (1, 1))
-    }
-    return sp.bmat([[blocks[0, 0], blocks[0, 1]], [blocks[0, 1], blocks[1, 1]]]).tocsc()
+    n = len(free) // 2
+    index = np.full(2 * n, -1)
+    index[free] = np.arange(int(free.sum()))
+    rows, cols, vals = [], [], []
+    for a in range(2):  # the four (u, v) blocks
+        for b in range(2):
+            r = index[np.broadcast_to((F + a * n)[:, :, None], stiffness.shape)]
+            c = index[np.broadcast_to((F + b * n)[:, None, :], stiffness.shape)]
+            keep = (r >= 0) & (c >= 0)
+            rows.append(r[keep])
+            cols.append(c[keep])
+            vals.append((W2[:, a, b][:, None, None] * stiffness)[keep])
+    k = int(free.sum())
+    return sp.csc_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(k, k)
+    )
 
 
 def _scatter_rows(D: sp.csr_matrix, faces: np.ndarray, g: np.ndarray) -> np.ndarray:
@@ -309,12 +331,17 @@ def _scatter_rows(D: sp.csr_matrix, faces: np.ndarray, g: np.ndarray) -> np.ndar
     return D.T @ out
 
 
+def _gradient_coefficients(frames: np.ndarray) -> np.ndarray:
+    """``g`` (m, 2, 3): column ``k`` of triangle t's Jacobian is ``sum_j g[t, k, j] x[F[t, j]]``
+    for one uv coordinate ``x`` (``J = [q1 q2] frames[t]``, ``q_j = uv[F_j] - uv[F_0]``)."""
+    return np.stack([-frames[:, 0, :] - frames[:, 1, :], frames[:, 0, :], frames[:, 1, :]], axis=2)
+
+
 def _gradient_rows(F: np.ndarray, frames: np.ndarray, n: int) -> sp.csr_matrix:
-    """``D`` (2m x n): row ``2t + k`` is column ``k`` of triangle t's Jacobian as a linear
-    function of one uv coordinate's vertex values (``J = [q1 q2] frames[t]``,
-    ``q_j = uv[F_j] - uv[F_0]``)."""
+    """``D`` (2m x n): row ``2t + k`` holds ``g[t, k]`` (:func:`_gradient_coefficients`) at the
+    columns ``F[t]``."""
     m = len(F)
     rows = np.repeat(2 * np.arange(m)[:, None] + np.arange(2), 3, axis=1).reshape(m, 2, 3)
     cols = np.broadcast_to(F[:, None, :], (m, 2, 3))
-    vals = np.stack([-frames[:, 0, :] - frames[:, 1, :], frames[:, 0, :], frames[:, 1, :]], axis=2)
+    vals = _gradient_coefficients(frames)
     return sp.csr_matrix((vals.ravel(), (rows.ravel(), cols.ravel())), shape=(2 * m, n))
