@@ -20,6 +20,8 @@ Then (not in the paper, on by default, ``refine="none"`` turns it off) :func:`ar
 few as-rigid-as-possible iterations from that map and keeps them only if they do not make the map
 worse: measured on folded cortex-like parcels, it turns most of the eigenmap's few boundary flips
 into bijective maps and brings the median angle distortion close to 1 (see BENCHMARKS.md).
+``refine="slim"`` (the pipeline's default, ``[split] refine``) then runs the flip-free
+distortion refinement of :mod:`segparam.refine` on a map with no flipped triangle.
 
 ``method="classic-hlle"`` is the Donoho-Grimes estimator (PCA tangent, k nearest neighbours,
 Hessian estimator from a Gram-Schmidt of ``[1, u, v, u^2, uv, v^2]``): the paper's baseline.
