@@ -48,7 +48,9 @@ For each mesh and tool: wall seconds (the minimum over ``--repeat`` runs), chart
 triangles, mirrored charts, overlap (texels shared by two charts, ``footprint_conflicts`` at 1024
 with padding 0), utilization (uv triangle area over the unit square; xatlas's uvs are put in the
 square of its atlas' longer side), L2 / Linf stretch and angle distortion
-(``segparam.quality.distortion``). ``ratio`` is segparam seconds / xatlas seconds. The quality
+(``segparam.quality.distortion``), seam (``segparam.quality.seam_length``: total 3-D length of
+the mesh edges whose two faces have different uv rows, over sqrt of the surface area; the
+mesh's own boundary is not a seam). ``ratio`` is segparam seconds / xatlas seconds. The quality
 figures come from the first run (segparam is seeded and xatlas deterministic: every run gives the
 same atlas). A second table gives segparam's seconds per stage (``Atlas.timings`` of its fastest
 run: clean, remesh, segment, parameterize, pack; ``other`` is the rest of the wall time,
@@ -89,9 +91,10 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from segparam.io import load_mesh
+from segparam.mesh import face_areas
 from segparam.pack import footprint_conflicts
 from segparam.pipeline import PipelineConfig, build_atlas
-from segparam.quality import distortion, signed_areas
+from segparam.quality import distortion, seam_length, signed_areas
 from segparam.remesh import mesh_quality, should_remesh
 from segparam.synthetic import brain_like_surface
 
@@ -333,8 +336,17 @@ def uv_components(uv_F: np.ndarray, n_uv: int) -> np.ndarray:
     return lab.astype(np.int64)
 
 
-def measures(P: np.ndarray, uv: np.ndarray, uv_F: np.ndarray, chart: np.ndarray) -> dict:
-    """All figures of an atlas; P holds the 3-D position of each uv row, uv is in [0, 1]^2."""
+def measures(
+    V: np.ndarray,
+    F: np.ndarray,
+    uv: np.ndarray,
+    uv_F: np.ndarray,
+    uv_vertex: np.ndarray,
+    chart: np.ndarray,
+) -> dict:
+    """All figures of an atlas of the mesh ``(V, F)``: ``uv`` (in [0, 1]^2) row ``k`` belongs to
+    mesh vertex ``uv_vertex[k]``, ``uv_F`` are the faces of ``F`` in uv rows."""
+    P = V[uv_vertex]
     uvs, faces = per_chart(uv, uv_F, chart)
     row = {"charts": len(uvs)}
     row.update(orientation(uv, uv_F, chart))
@@ -342,6 +354,7 @@ def measures(P: np.ndarray, uv: np.ndarray, uv_F: np.ndarray, chart: np.ndarray)
     row["utilization"] = float(np.abs(signed_areas(uv, uv_F)).sum())
     d = distortion(P, uv_F, uv)
     row.update({k: d[k] for k in ("l2_stretch", "linf_stretch", "angle_distortion")})
+    row["seam"] = seam_length(V, F, uv_F, uv_vertex) / np.sqrt(face_areas(V, F).sum())
     return row
 
 
@@ -361,7 +374,9 @@ def run_segparam(V: np.ndarray, F: np.ndarray, mode: str, repeat: int = 1) -> di
             atlas = a
     best = int(np.argmin(seconds))
     row = {"tool": "segparam" if mode == "off" else f"segparam-{mode}", "seconds": seconds[best]}
-    row.update(measures(atlas.V[atlas.uv_vertex], atlas.uv, atlas.uv_F, atlas.chart_of_face))
+    row.update(
+        measures(atlas.V, atlas.F, atlas.uv, atlas.uv_F, atlas.uv_vertex, atlas.chart_of_face)
+    )
     row["faces_out"] = int(len(atlas.uv_F))
     row["stages"] = {k: round(v, 3) for k, v in stages[best].items()}
     row["remeshed"] = bool(atlas.remeshing.remeshed)
@@ -403,7 +418,7 @@ def run_xatlas(V: np.ndarray, F: np.ndarray, repeat: int = 1) -> dict:
         chart = uv_components(idx, len(uv))
         source = "uv components"
     row = {"tool": "xatlas", "seconds": min(seconds)}
-    row.update(measures(V[vmap], uv, idx, chart))
+    row.update(measures(V, F, uv, idx, vmap, chart))
     row.update(
         {
             "faces_out": int(len(idx)),
@@ -432,6 +447,7 @@ COLS = (
     ("l2_stretch", "L2", "6.3f"),
     ("linf_stretch", "Linf", "8.2f"),
     ("angle_distortion", "angle", "6.3f"),
+    ("seam", "seam", "6.2f"),
 )
 
 

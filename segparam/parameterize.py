@@ -20,6 +20,8 @@ Then (not in the paper, on by default, ``refine="none"`` turns it off) :func:`ar
 few as-rigid-as-possible iterations from that map and keeps them only if they do not make the map
 worse: measured on folded cortex-like parcels, it turns most of the eigenmap's few boundary flips
 into bijective maps and brings the median angle distortion close to 1 (see BENCHMARKS.md).
+``refine="slim"`` (the pipeline's default, ``[split] refine``) then runs the flip-free
+distortion refinement of :mod:`segparam.refine` on a map with no flipped triangle.
 
 ``method="classic-hlle"`` is the Donoho-Grimes estimator (PCA tangent, k nearest neighbours,
 Hessian estimator from a Gram-Schmidt of ``[1, u, v, u^2, uv, v^2]``): the paper's baseline.
@@ -38,7 +40,7 @@ from numba import njit
 from scipy.sparse.csgraph import connected_components as graph_components
 from scipy.spatial import cKDTree
 
-from .errors import InvalidMeshError, check_choice, check_int
+from .errors import InvalidMeshError, check_choice, check_int, check_number
 from .linalg import one_blas_thread, smallest_eigenpairs, spd_solver
 from .mesh import (
     boundary_edges,
@@ -64,6 +66,7 @@ from .quality import (
     singular_values,
     triangle_frames,
 )
+from .refine import ANGLE_WEIGHT, MAX_STRETCH_INCREASE, SMALL_CHART_FACES, slim_refine
 
 log = logging.getLogger(__name__)
 
@@ -87,7 +90,9 @@ __all__ = [
 ]
 
 METHODS = ("hessian", "classic-hlle")
-REFINES = ("arap", "none")
+#: "slim": ARAP, then the symmetric Dirichlet refinement of :mod:`segparam.refine` on a
+#: flip-free map; "arap": ARAP alone; "none": the paper's map.
+REFINES = ("slim", "arap", "none")
 TANGENTS = ("normals", "pca")
 #: A quadratic in (u, v) has 6 coefficients, so a least-squares fit needs at least 6 points.
 MIN_POINTS = 6
@@ -798,18 +803,29 @@ class HessianSolver:
         self.assemble_seconds = time.perf_counter() - t0
 
     def solve(
-        self, *, seed: int = 0, refine: str = "arap", refine_iterations: int = 10
+        self,
+        *,
+        seed: int = 0,
+        refine: str = "arap",
+        refine_iterations: int = 10,
+        angle_weight: float = ANGLE_WEIGHT,
     ) -> ChartMap:
         """Eigenvectors of ``K``, isometric 2x2 fit, orientation, optional refinement, quality.
 
         ``refine="arap"`` runs :func:`arap_refine` from the Hessian map and keeps the refined map
         unless it is worse: it is kept when it is bijective, or when neither map is and it has
         fewer flipped triangles. A map that is already rigid (see :func:`arap_refine`) is not
-        refined. ``refine="none"`` returns the paper's map as it is.
+        refined. ``refine="slim"`` then lowers the symmetric Dirichlet energy of a map with no
+        flipped triangle (:func:`segparam.refine.slim_refine`; ``angle_weight`` trades stretch
+        for angle distortion), kept when bijective (and, on charts of fewer than
+        ``SMALL_CHART_FACES`` faces, when its L2 stretch is at most ``MAX_STRETCH_INCREASE``
+        above the map's before).
+        ``refine="none"`` returns the paper's map as it is.
         """
         seed = check_int("seed", seed, low=0)
         refine = check_choice("refine", refine, REFINES)
         refine_iterations = check_int("refine_iterations", refine_iterations, low=0)
+        angle_weight = check_number("angle_weight", angle_weight, low=0)
         t0 = time.perf_counter()
         guess = np.column_stack([np.ones(len(self._Vn)), self._Vn])
         Y, values = hessian_eigenmap(self.K, seed=seed, guess=guess)
@@ -820,7 +836,7 @@ class HessianSolver:
         refined = False
         quality = None
         steps = 0
-        if refine == "arap":
+        if refine in ("arap", "slim"):
             uv_r, steps = _arap(
                 self._Vn, self.F, uv, iterations=refine_iterations, inv_frames=frames
             )
@@ -834,6 +850,20 @@ class HessianSolver:
                     uv, quality, refined = uv_r, q_r, True
         if quality is None:
             quality = chart_quality(self._Vn, self.F, uv, frames)
+        if refine == "slim" and quality.n_flipped == 0 and quality.n_degenerate == 0:
+            uv_s, moved = slim_refine(
+                self._Vn, self.F, uv, inv_frames=frames, angle_weight=angle_weight
+            )
+            q_s = chart_quality(self._Vn, self.F, uv_s, frames) if moved[0] else None
+            if (
+                q_s is not None
+                and q_s.bijective
+                and (
+                    len(self.F) >= SMALL_CHART_FACES
+                    or q_s.l2_stretch <= quality.l2_stretch + MAX_STRETCH_INCREASE
+                )
+            ):
+                uv, quality, refined = uv_s, q_s, True
         t3 = time.perf_counter()
         return ChartMap(
             uv=(uv - uv.min(axis=0)) * self.scale,
@@ -862,6 +892,7 @@ def parameterize_chart(
     min_points: int = MIN_POINTS,
     n_neighbors: int = 12,
     refine: str = "arap",
+    angle_weight: float = ANGLE_WEIGHT,
 ) -> ChartMap:
     """Map one disk-like chart to the plane with the Hessian-eigenfunction solver.
 
@@ -880,9 +911,15 @@ def parameterize_chart(
         Smallest neighbourhood for the quadratic fit (``"hessian"``).
     n_neighbors : int
         Neighbourhood size of ``"classic-hlle"``.
-    refine : {"arap", "none"}
+    refine : {"slim", "arap", "none"}
         ``"arap"`` (default): as-rigid-as-possible iterations from the eigenmap, kept only when
-        they do not make the map worse (:meth:`HessianSolver.solve`); ``"none"``: the paper's map.
+        they do not make the map worse (:meth:`HessianSolver.solve`); ``"slim"``: the same, then
+        the flip-free symmetric Dirichlet refinement (:mod:`segparam.refine`), kept when
+        bijective; ``"none"``: the paper's map.
+    angle_weight : float
+        ``refine="slim"`` only: weight (>= 0) of the conformal term added to the symmetric
+        Dirichlet energy (:func:`segparam.refine.slim_refine`); higher trades L2 stretch for
+        less angle distortion.
 
     Returns
     -------
@@ -906,7 +943,7 @@ def parameterize_chart(
     solver = HessianSolver(
         V, F, method=method, tangent=tangent, min_points=min_points, n_neighbors=n_neighbors
     )
-    return solver.solve(seed=seed, refine=refine)
+    return solver.solve(seed=seed, refine=refine, angle_weight=angle_weight)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1295,6 +1332,7 @@ def solve_charts(
     tangent: str = "normals",
     refine: str = "arap",
     refine_iterations: int = 10,
+    angle_weight: float = ANGLE_WEIGHT,
 ) -> ChartMaps:
     """``HessianSolver(V_c, F_c, tangent=tangent).solve(refine=...)`` for every chart ``c`` of a
     disjoint union of small charts, all at once.
@@ -1324,6 +1362,7 @@ def solve_charts(
     tangent = check_choice("tangent", tangent, TANGENTS)
     refine = check_choice("refine", refine, REFINES)
     refine_iterations = check_int("refine_iterations", refine_iterations, low=0)
+    angle_weight = check_number("angle_weight", angle_weight, low=0)
     vert_chart = np.asarray(vert_chart, dtype=np.int64)
     n_charts = int(vert_chart[-1]) + 1
     size = np.bincount(vert_chart, minlength=n_charts)
@@ -1346,7 +1385,7 @@ def solve_charts(
     uv[mirror[vert_chart], 0] *= -1.0
     q = charts_quality(Vn, F, uv, vert_chart, n_charts, frames)
     use_r = np.zeros(n_charts, dtype=bool)
-    if refine == "arap":
+    if refine in ("arap", "slim"):
         uv_r, steps = _arap_charts(
             Vn, F, uv, vert_chart, vstart, n_charts, iterations=refine_iterations,
             inv_frames=frames,
@@ -1358,6 +1397,25 @@ def solve_charts(
             )
             q = {k: np.where(use_r, q_r[k], q[k]) for k in q}
             uv = np.where(use_r[vert_chart][:, None], uv_r, uv)
+    if refine == "slim":
+        go = (q["n_flipped"] == 0) & (q["n_degenerate"] == 0)  # others: energy infinite
+        uv_s, moved = slim_refine(
+            Vn, F, uv, vert_chart=vert_chart, n_charts=n_charts, inv_frames=frames, charts=go,
+            angle_weight=angle_weight,
+        )  # fmt: skip
+        if moved.any():
+            q_s = charts_quality(Vn, F, uv_s, vert_chart, n_charts, frames)
+            use_s = (
+                (moved > 0)
+                & q_s["bijective"]
+                & (
+                    (n_faces >= SMALL_CHART_FACES)
+                    | (q_s["l2_stretch"] <= q["l2_stretch"] + MAX_STRETCH_INCREASE)
+                )
+            )
+            q = {k: np.where(use_s, q_s[k], q[k]) for k in q}
+            uv = np.where(use_s[vert_chart][:, None], uv_s, uv)
+            use_r |= use_s
     low = np.minimum.reduceat(uv, vstart, axis=0)
     uv = (uv - low[vert_chart]) * scale[vert_chart][:, None]
     return ChartMaps(uv=uv, quality=q, refined=use_r, eigenvalues=values)

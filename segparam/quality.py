@@ -32,6 +32,7 @@ __all__ = [
     "distortion",
     "inverse_frames",
     "jacobians",
+    "seam_length",
     "signed_areas",
     "triangle_frames",
 ]
@@ -326,3 +327,27 @@ def distortion(
             "area_distortion": float((w * np.abs(np.log(s1 * s2))).sum()),
             "symmetric_dirichlet": float((w * (s1**2 + s2**2 + inv1**2 + inv2**2)).sum()),
         }
+
+
+def seam_length(V: np.ndarray, F: np.ndarray, uv_F: np.ndarray, uv_vertex: np.ndarray) -> float:
+    """Total 3-D length of an atlas' seams: mesh edges whose two faces have different uv rows.
+
+    An edge of the uv mesh ``uv_F`` with one face is a seam side or a boundary edge of the
+    mesh; the mesh's own boundary is subtracted and every seam has two sides. Divide by
+    ``sqrt`` of the surface area for a scale-free figure (a unit square cut once across has 1).
+
+    Parameters
+    ----------
+    V : (n, 3) float ndarray
+    F : (m, 3) int ndarray
+        The mesh (edge-manifold).
+    uv_F : (m, 3) int ndarray
+        The atlas' faces in uv rows, in the order of ``F``.
+    uv_vertex : (k,) int ndarray
+        Mesh vertex of every uv row.
+    """
+    B3 = boundary_edges(F)
+    P = uv_vertex[boundary_edges(uv_F)]
+    cut = np.linalg.norm(V[B3[:, 0]] - V[B3[:, 1]], axis=1).sum()
+    total = np.linalg.norm(V[P[:, 0]] - V[P[:, 1]], axis=1).sum()
+    return float(total - cut) / 2

@@ -55,6 +55,7 @@ from .parameterize import (
     MAX_EXTEND,
     METHODS,
     MIN_POINTS,
+    REFINES,
     TANGENTS,
     charts_quality,
     parameterize_chart,
@@ -62,6 +63,7 @@ from .parameterize import (
     solve_charts,
 )
 from .quality import ChartQuality, chart_quality
+from .refine import ANGLE_WEIGHT, SMALL_CHART_FACES
 from .segment import divide, face_affinity
 
 log = logging.getLogger(__name__)
@@ -69,6 +71,16 @@ log = logging.getLogger(__name__)
 __all__ = ["Chart", "ChartSet", "SplitConfig", "parameterize_charts", "project_chart"]
 
 
+#: Default L2-stretch target (``SplitConfig.max_stretch``). Measured with
+#: ``benchmarks/bench_quality.py`` (refine "slim", angle weight 16): at 1.02 brain-20k keeps its
+#: 8 charts (L2 1.0083), fsaverage5's cortex goes 57 -> 68 charts (L2 1.0143 -> 1.0092), the
+#: icosphere 2 -> 4 (1.061 -> 1.006); 1.01 costs fsaverage5 106 charts and 2-4x the stage time.
+MAX_STRETCH = 1.02
+#: Charts with fewer faces are not split for stretch: they are the pieces of small curved parts
+#: (the 40-face halves of 80-face spheres), which a split flattens only a little, at a solver
+#: call per piece: on 300 such spheres the target took the stage from 1.5 to 60+ s. The
+#: refinement keeps their stretch instead (:data:`segparam.refine.SMALL_CHART_FACES`).
+STRETCH_MIN_FACES = SMALL_CHART_FACES
 #: Smaller meshes are parameterized in this process: starting workers costs about a second.
 PARALLEL_MIN_FACES = 100_000
 #: A chart is planar when no unit face normal differs from the first by more than this.
@@ -96,11 +108,21 @@ class SplitConfig:
     max_distortion : float or None
         Angle-distortion target (finite, >= 1): a bijective chart above it is split too (None:
         no target).
+    max_stretch : float or None
+        L2-stretch target (Sander's, finite, >= 1): a bijective chart of at least
+        ``STRETCH_MIN_FACES`` faces above it is split too (None: no target). The knob that
+        trades charts against stretch (``benchmarks/bench_quality.py`` draws the curve).
     min_faces : int
         Pieces with fewer faces (>= 1) skip the solver and use the planar projection.
     n_jobs : int
         Worker processes for meshes of at least ``PARALLEL_MIN_FACES`` faces (0: one per CPU,
         1: none). Charts are independent, so the result does not depend on it.
+    refine : {"slim", "arap", "none"}
+        The refinement after the solver (see :func:`segparam.parameterize.parameterize_chart`):
+        ``"none"`` keeps the paper's map.
+    angle_weight : float
+        ``refine="slim"``: weight (finite, >= 0) of the conformal term in the refined energy;
+        higher trades L2 stretch for less angle distortion (:func:`segparam.refine.slim_refine`).
 
     Raises
     ------
@@ -113,8 +135,11 @@ class SplitConfig:
     tangent: str = "normals"
     max_depth: int = 6
     max_distortion: float | None = None
+    max_stretch: float | None = MAX_STRETCH
     min_faces: int = 8
     n_jobs: int = 0
+    refine: str = "slim"
+    angle_weight: float = ANGLE_WEIGHT
 
     def __post_init__(self) -> None:
         # Every field, type first (bool is not a number here); numbers are stored as plain
@@ -126,8 +151,11 @@ class SplitConfig:
             "max_distortion": check_number(
                 "max_distortion", self.max_distortion, low=1, optional=True
             ),
+            "max_stretch": check_number("max_stretch", self.max_stretch, low=1, optional=True),
             "min_faces": check_int("min_faces", self.min_faces, low=1),
             "n_jobs": check_int("n_jobs", self.n_jobs, low=0),
+            "refine": check_choice("refine", self.refine, REFINES),
+            "angle_weight": check_number("angle_weight", self.angle_weight, low=0),
         }
         for name, value in checked.items():
             object.__setattr__(self, name, value)
@@ -445,7 +473,7 @@ def _bulk_charts(
     * otherwise, with the ``"hessian"`` solver, at most ``BATCH_MAX_VERTICES`` vertices and
       everything :func:`segparam.parameterize.check_chart` asks: solved together with the others
       (:func:`segparam.parameterize.solve_charts`), kept if bijective and within
-      ``max_distortion``: ``"hessian"``.
+      ``max_distortion`` and ``max_stretch``: ``"hessian"``.
 
     A chart that fails any of these is not in the result: the per-chart path maps or splits it,
     as before. ``V`` is in the stage's unit frame; the charts returned are in mesh indices and
@@ -532,13 +560,15 @@ def _bulk_charts(
     if len(take):
         Vs, Fs, vc = part(take)
         try:
-            maps = solve_charts(Vs, Fs, vc, tangent=cfg.tangent)
+            maps = solve_charts(
+                Vs, Fs, vc, tangent=cfg.tangent, refine=cfg.refine, angle_weight=cfg.angle_weight
+            )
         except (InvalidMeshError, np.linalg.LinAlgError) as exc:  # not expected: one by one
             log.debug("batched solver failed (%s); solving %d charts one by one", exc, len(take))
             return out
         ok = maps.quality["bijective"]
-        if cfg.max_distortion is not None:
-            ok &= maps.quality["angle_distortion"] <= cfg.max_distortion
+        q = maps.quality
+        ok &= _within_targets(q["angle_distortion"], q["l2_stretch"], nf[cand][take], cfg)
         emit(take, vc, maps.uv, maps.quality, ok, "hessian")
     return out
 
@@ -572,6 +602,18 @@ class _MeshAffinity:
 
 def _given(W: sp.csr_matrix) -> sp.csr_matrix:
     return W
+
+
+def _within_targets(angle, l2, n_faces, cfg: SplitConfig):
+    """Whether charts with these angle distortions, L2 stretches and face counts meet the
+    config's targets (``max_distortion``; ``max_stretch`` from ``STRETCH_MIN_FACES`` faces up;
+    a missing target is met)."""
+    ok = np.ones(np.shape(angle), dtype=bool)
+    if cfg.max_distortion is not None:
+        ok &= np.asarray(angle) <= cfg.max_distortion
+    if cfg.max_stretch is not None:
+        ok &= (np.asarray(l2) <= cfg.max_stretch) | (np.asarray(n_faces) < STRETCH_MIN_FACES)
+    return ok
 
 
 def _solve_source(
@@ -632,13 +674,15 @@ def _try_piece(
                 return Chart(faces, vertices, local_F, uv, quality, src, depth, "planar")
         try:
             result = parameterize_chart(
-                Vl, local_F, method=cfg.method, tangent=cfg.tangent, seed=seed
-            )
+                Vl, local_F, method=cfg.method, tangent=cfg.tangent, seed=seed, refine=cfg.refine,
+                angle_weight=cfg.angle_weight,
+            )  # fmt: skip
         except InvalidMeshError as exc:  # not a disk (e.g. a half that pinches): split it
             log.debug("chart %d depth %d: %s", src, depth, exc)
             return None
-        ok = result.bijective and (
-            cfg.max_distortion is None or result.quality.angle_distortion <= cfg.max_distortion
+        q = result.quality
+        ok = result.bijective and bool(
+            _within_targets(q.angle_distortion, q.l2_stretch, len(faces), cfg)
         )
         if ok:
             return Chart(

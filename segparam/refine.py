@@ -1,0 +1,347 @@
+"""Flip-free distortion refinement of chart maps: SLIM iterations on the symmetric Dirichlet
+energy, optionally with a conformal term.
+
+Not in the paper. The Hessian eigenmap (and the ARAP iterations after it, see
+:mod:`segparam.parameterize`) leaves charts close to isometric, balancing angle and area
+distortion as ARAP does; textures are judged by both (a checkerboard's squares should stay
+square and the same size). This module minimises, per chart, with a free boundary,
+
+    E(uv) = sum_t A_t [s1^2 + s2^2 + s1^-2 + s2^-2 + mu (s1/s2 + s2/s1 - 2)] / sum_t A_t
+
+(4 for an isometry; ``s1 >= s2`` the singular values of triangle t's Jacobian, ``mu`` the
+``angle_weight``: 0 is the symmetric Dirichlet energy, larger values buy less angle distortion
+with some area distortion), started from a map with every triangle positive, and keeps every
+triangle positive at every step, so the map stays locally injective by construction:
+
+* direction (Rabinovich et al. 2017, "Scalable Locally Injective Mappings", sec. 4): with
+  ``J_t = U S V^T``, ``R_t = U V^T`` and ``W_t = U diag(w(s1), w(s2)) U^T``,
+  ``w(s)^2 = (s + 1)(s^2 + 1) / s^3`` (``f'(s) / (2 (s - 1))`` for ``f(s) = s^2 + s^-2``), SLIM's
+  proxy ``sum_t A_t ||W_t (J_t - R_t)||_F^2`` is a quadratic ``x^T H x - 2 b^T x`` in the stacked
+  ``x = (u, v)`` whose gradient is the symmetric Dirichlet energy's. The step is
+  ``d = -H^-1 grad E / 2``: exactly SLIM's step when ``mu = 0``, and a descent direction
+  preconditioned by SLIM's matrix otherwise (``H`` is positive definite once a vertex per chart
+  is pinned). One Cholesky factorization per iteration (:func:`segparam.linalg.spd_solver`);
+* flip-free line search (Smith & Schaefer 2015, "Bijective Parameterization with Free
+  Boundaries", sec. 3.1): along ``d`` the signed area of each triangle is a quadratic in the
+  step ``tau``; its smallest positive root bounds the step, and ``tau = min(1, 0.8 * root)``
+  (their 0.8) is halved until the energy decreases (the energy is infinite at a flip, so any
+  decrease keeps every triangle positive).
+
+Both terms are barriers against flips but not against the boundary overlapping itself, so the
+caller checks the result (:func:`segparam.quality.chart_quality`) and keeps the starting map
+when it is not bijective. Charts of a disjoint union are refined together: the system is
+block-diagonal, the step and the stopping rule are per chart (no Python loop over vertices or
+faces).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from .linalg import spd_solver
+from .mesh import face_areas
+from .quality import inverse_frames, jacobians, singular_values, triangle_frames
+
+__all__ = [
+    "ANGLE_WEIGHT",
+    "MAX_STRETCH_INCREASE",
+    "SMALL_CHART_FACES",
+    "slim_refine",
+    "symmetric_dirichlet",
+]
+
+#: Default weight of the conformal term (see :func:`slim_refine`). Measured on brain-20k's 8
+#: charts (``benchmarks/bench_quality.py``): 0 -> L2 1.0037 / angle 1.0600, 4 -> 1.0067 / 1.0297,
+#: 16 -> 1.0083 / 1.0182 (xatlas, 13 charts: 1.0379 / 1.0087).
+ANGLE_WEIGHT = 16.0
+#: On charts of fewer than ``SMALL_CHART_FACES`` faces the refined map is kept only if its L2
+#: stretch is at most ``MAX_STRETCH_INCREASE`` above the starting map's (checked by the caller,
+#: :mod:`segparam.parameterize`). Larger charts that the conformal term stretches past the
+#: stretch target are split (``[split] max_stretch``, from the same size up), which is what
+#: brings fsaverage5's angle within 0.02 of xatlas's; small ones are not split, and the 40-face
+#: hemispheres of small spheres would go from L2 1.026 to 1.051 (measured, bench_atlas).
+MAX_STRETCH_INCREASE = 0.01
+SMALL_CHART_FACES = 64
+
+#: Iterations stop for a chart once one lowers its energy's excess over the isometry's (4) by
+#: less than this fraction (measured: on a saddle, a brain parcel and a spherical cap the energy
+#: is within 1e-4 of its limit after 5-10 iterations, where this rule stops).
+SLIM_TOL = 1e-2
+#: ... or once that excess is below this: every triangle within ~0.1% of an isometry (a
+#: developable chart; the excess is about ``8 eps^2`` for singular values ``1 +- eps``).
+SLIM_FLOOR = 1e-5
+#: Most iterations; a chart that has not converged keeps its best map so far.
+SLIM_ITERATIONS = 30
+#: Fraction of the largest flip-free step taken (Smith & Schaefer 2015 use 0.8), so no triangle
+#: reaches zero area in one step.
+STEP_FRACTION = 0.8
+#: Halvings of the step before a chart gives up (the direction is then useless).
+MAX_HALVINGS = 12
+
+
+def _segment_min(ids: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    out = np.full(n, np.inf)
+    np.minimum.at(out, ids, values)
+    return out
+
+
+def _energy_terms(J: np.ndarray, angle_weight: float = 0.0) -> np.ndarray:
+    """Per Jacobian, ``s1^2 + s2^2 + s1^-2 + s2^-2`` (``||J||_F^2 (1 + det^-2)``) plus
+    ``angle_weight`` times the conformal term ``s1 / s2 + s2 / s1 - 2`` (``||J||_F^2 / det - 2``);
+    ``inf`` where ``det J <= 0``."""
+    det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
+    fro = (J**2).sum(axis=(1, 2))
+    good = det > 0
+    inv = 1.0 / np.where(good, det, 1.0)
+    return np.where(good, fro * (1.0 + inv**2) + angle_weight * (fro * inv - 2.0), np.inf)
+
+
+def _energy_gradients(J: np.ndarray, angle_weight: float) -> np.ndarray:
+    """``d/dJ`` of :func:`_energy_terms` (``(m, 2, 2)``, det J > 0): with ``C = d det / dJ``
+    (the cofactor matrix), ``2 J (1 + det^-2) - 2 ||J||^2 det^-3 C`` and, for the conformal term,
+    ``2 J / det - ||J||^2 det^-2 C``."""
+    det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
+    fro = (J**2).sum(axis=(1, 2))
+    C = np.stack(
+        [np.stack([J[:, 1, 1], -J[:, 1, 0]], 1), np.stack([-J[:, 0, 1], J[:, 0, 0]], 1)], 1
+    )
+    inv = (1.0 / det)[:, None, None]
+    fro = fro[:, None, None]
+    G = 2 * J * (1 + inv**2) - 2 * fro * inv**3 * C
+    if angle_weight:
+        G = G + angle_weight * (2 * J * inv - fro * inv**2 * C)
+    return G
+
+
+def symmetric_dirichlet(
+    V: np.ndarray,
+    F: np.ndarray,
+    uv: np.ndarray,
+    inv_frames: np.ndarray | None = None,
+    *,
+    angle_weight: float = 0.0,
+) -> float:
+    """Area-weighted mean symmetric Dirichlet energy of ``(V, F) -> uv`` as it is (not rescaled),
+    plus ``angle_weight`` times the mean conformal term ``s1 / s2 + s2 / s1 - 2``: the energy
+    :func:`slim_refine` lowers.
+
+    ``4`` for an isometry, ``inf`` if a triangle is flipped or degenerate.
+    """
+    area = face_areas(V, F)
+    terms = _energy_terms(jacobians(V, F, uv, inv_frames), angle_weight)
+    return float(area @ terms / area.sum())
+
+
+def _step_bound(uv: np.ndarray, d: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Per triangle, the smallest ``tau > 0`` where the signed area of ``uv + tau d`` is zero
+    (``inf`` if none): area(tau) = a + b tau + c tau^2 (Smith & Schaefer 2015, sec. 3.1)."""
+    p1, p2 = uv[F[:, 1]] - uv[F[:, 0]], uv[F[:, 2]] - uv[F[:, 0]]
+    q1, q2 = d[F[:, 1]] - d[F[:, 0]], d[F[:, 2]] - d[F[:, 0]]
+
+    def cross(x, y):
+        return x[:, 0] * y[:, 1] - x[:, 1] * y[:, 0]
+
+    a = cross(p1, p2)
+    b = cross(p1, q2) + cross(q1, p2)
+    c = cross(q1, q2)
+    tau = np.full(len(F), np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        disc = b * b - 4 * a * c
+        root = np.sqrt(np.maximum(disc, 0.0))
+        # both roots in a cancellation-free form: t = 2a / (-b -+ root)
+        for t in (2 * a / (-b - root), 2 * a / (-b + root)):
+            ok = (disc >= 0) & np.isfinite(t) & (t > 0)
+            tau = np.where(ok, np.minimum(tau, t), tau)
+        linear = (np.abs(c) <= 1e-14 * np.abs(b) ** 2 / np.maximum(np.abs(a), 1e-300)) & (b < 0)
+        tau = np.where(linear, np.minimum(tau, -a / b), tau)
+    return tau
+
+
+def slim_refine(
+    V: np.ndarray,
+    F: np.ndarray,
+    uv: np.ndarray,
+    *,
+    vert_chart: np.ndarray | None = None,
+    n_charts: int = 1,
+    inv_frames: np.ndarray | None = None,
+    iterations: int = SLIM_ITERATIONS,
+    tol: float = SLIM_TOL,
+    charts: np.ndarray | None = None,
+    angle_weight: float = ANGLE_WEIGHT,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Lower the symmetric Dirichlet energy of every chart, never flipping a triangle.
+
+    The step direction is ``-H^-1 grad E`` with ``H`` SLIM's reweighted system at the current map
+    (for the symmetric Dirichlet energy alone this is exactly SLIM's step: SLIM's proxy has the
+    energy's gradient); with ``angle_weight > 0`` the same ``H`` preconditions the gradient of
+    the energy plus ``angle_weight`` times the conformal term ``s1 / s2 + s2 / s1 - 2`` (also
+    infinite at a flip), which trades area distortion (L2 stretch) for angle distortion.
+
+    Parameters
+    ----------
+    V : (n, 3) float ndarray
+    F : (m, 3) int ndarray
+        One chart, or a disjoint union of charts (``vert_chart``); each connected.
+    uv : (n, 2) float ndarray
+        Starting map, in the units of ``V`` (near-isometric: the energy is not scale-free). A
+        chart with a flipped or degenerate triangle is left as it is.
+    vert_chart : (n,) int ndarray, optional
+        Chart of every vertex, ``0 .. n_charts - 1`` (default: one chart).
+    inv_frames : (m, 2, 2) float ndarray, optional
+        ``inverse_frames(triangle_frames(V, F))``, if already computed.
+    iterations : int
+        Most SLIM iterations.
+    tol : float
+        A chart stops once an iteration lowers its energy's excess over 4 (the isometry's) by
+        less than this fraction.
+    charts : (n_charts,) bool ndarray, optional
+        The charts to refine (default all); the others are left as they are.
+    angle_weight : float
+        Weight of the conformal term (>= 0; 0: the symmetric Dirichlet energy alone).
+
+    Returns
+    -------
+    uv : (n, 2) float64 ndarray
+        Every triangle positive where the start had every triangle positive; each chart's
+        energy at most its starting energy.
+    steps : (n_charts,) int64 ndarray
+        Iterations that moved each chart (0: unchanged).
+
+    References
+    ----------
+    M. Rabinovich, R. Poranne, D. Panozzo, O. Sorkine-Hornung, Scalable Locally Injective
+    Mappings, ACM TOG 36(2), 2017. J. Smith, S. Schaefer, Bijective Parameterization with Free
+    Boundaries, ACM TOG 34(4), 2015.
+    """
+    uv = np.array(uv, dtype=np.float64)
+    n = len(V)
+    vc = np.zeros(n, dtype=np.int64) if vert_chart is None else np.asarray(vert_chart, np.int64)
+    fc = vc[F[:, 0]]
+    frames = inverse_frames(triangle_frames(V, F)) if inv_frames is None else inv_frames
+    area = face_areas(V, F)
+    total = np.bincount(fc, weights=area, minlength=n_charts)
+    total = np.where(total > 0, total, 1.0)
+    D = _gradient_rows(F, frames, n)
+    g3 = _gradient_coefficients(frames)  # (m, 2, 3)
+    local = np.einsum("mki,mkj->mij", g3, g3)  # sum_k g_k g_k^T: the triangle's stiffness
+
+    def energy(x: np.ndarray) -> np.ndarray:
+        e = area * _energy_terms(jacobians(V, F, x, frames), angle_weight)
+        return np.bincount(fc, weights=e, minlength=n_charts) / total
+
+    E = energy(uv)
+    active = np.isfinite(E) & (E - 4.0 > SLIM_FLOOR)
+    if charts is not None:
+        active &= np.asarray(charts, dtype=bool)
+    steps = np.zeros(n_charts, dtype=np.int64)
+    # one pinned vertex per chart (the lowest index): the energy ignores translations
+    pin = np.zeros(n, dtype=bool)
+    first = np.full(n_charts, n)
+    np.minimum.at(first, vc, np.arange(n))
+    pin[first[first < n]] = True
+    for _ in range(iterations):
+        if not active.any():
+            break
+        faces = np.flatnonzero(active[fc])
+        J = jacobians(V, F[faces], uv, frames[faces])
+        W2 = _slim_weights(J)
+        g = _energy_gradients(J, angle_weight) * area[faces][:, None, None]
+        grad = np.concatenate([_scatter_rows(D, faces, g[:, i, :]) for i in range(2)])
+        move = active[vc] & ~pin
+        free = np.concatenate([move, move])
+        H = _proxy_matrix(F[faces], local[faces] * area[faces][:, None, None], W2, free)
+        # SLIM's proxy sum A ||W (J - R)||^2 has gradient 2 (H x - rhs) = grad E, so its
+        # minimiser is x - H^-1 grad E / 2; pinned vertices stay
+        delta = np.zeros(2 * n)
+        delta[free] = -0.5 * spd_solver(H)(grad[free])
+        d = np.stack([delta[:n], delta[n:]], axis=1)
+        tau_max = _segment_min(fc[faces], _step_bound(uv, d, F[faces]), n_charts)
+        tau = np.where(active, np.minimum(1.0, STEP_FRACTION * tau_max), 0.0)
+        new_E = np.full(n_charts, np.inf)
+        trial = active.copy()
+        for _ in range(MAX_HALVINGS):  # loop over step halvings, all charts at once
+            cand = uv + tau[vc][:, None] * d
+            e = energy(cand)
+            ok = trial & (e < E)
+            new_E = np.where(ok, e, new_E)
+            uv = np.where(ok[vc][:, None], cand, uv)
+            trial &= ~ok
+            if not trial.any():
+                break
+            tau = np.where(trial, tau / 2, tau)
+        moved = np.isfinite(new_E)
+        excess = np.maximum(E - 4.0, 1e-12)  # 4: the isometry's energy, the least possible
+        gain = np.zeros(n_charts)
+        gain[moved] = (E[moved] - new_E[moved]) / excess[moved]
+        steps += moved
+        E = np.where(moved, new_E, E)
+        active &= moved & (gain >= tol) & (E - 4.0 > SLIM_FLOOR)
+    return uv, steps
+
+
+def _slim_weights(J: np.ndarray) -> np.ndarray:
+    """``W^T W = U diag(w(s1)^2, w(s2)^2) U^T`` per Jacobian ``J = U S V^T`` (det J > 0), with
+    SLIM's symmetric Dirichlet weights ``w(s)^2 = (s + 1)(s^2 + 1) / s^3``, in closed form:
+    ``w2^2 I + (w1^2 - w2^2) u1 u1^T``, ``u1`` the leading eigenvector of ``J J^T``."""
+    s1, s2 = singular_values(J)
+    w1, w2 = ((s + 1) * (s * s + 1) / s**3 for s in (s1, s2))
+    JJ = J @ J.transpose(0, 2, 1)
+    theta = 0.5 * np.arctan2(2 * JJ[:, 0, 1], JJ[:, 0, 0] - JJ[:, 1, 1])
+    u = np.stack([np.cos(theta), np.sin(theta)], axis=1)
+    return w2[:, None, None] * np.eye(2) + (w1 - w2)[:, None, None] * u[:, :, None] * u[:, None, :]
+
+
+def _proxy_matrix(
+    F: np.ndarray, stiffness: np.ndarray, W2: np.ndarray, free: np.ndarray
+) -> sp.csc_matrix:
+    """Quadratic part ``H`` of SLIM's proxy ``sum_t A_t ||W_t (J_t - R_t)||_F^2`` over the stacked
+    ``x = (u, v)`` (the proxy is ``x^T H x - 2 rhs^T x + const``), rows and columns ``free`` only.
+
+    Column ``k`` of ``J_t`` is ``c_k = (g_k . u_t, g_k . v_t)`` (``g_k`` the triangle's gradient
+    coefficients, ``u_t`` its corners' values) and the term is ``sum_k (c_k - R e_k)^T W^T W
+    (c_k - R e_k)``: block ``(a, b)`` of ``H`` gathers ``A_t (W^T W)_ab sum_k g_k g_k^T``, the
+    triangle's ``stiffness`` (given times ``A_t``) scaled by one weight, assembled from COO
+    triplets.
+    """
+    n = len(free) // 2
+    index = np.full(2 * n, -1)
+    index[free] = np.arange(int(free.sum()))
+    rows, cols, vals = [], [], []
+    for a in range(2):  # the four (u, v) blocks
+        for b in range(2):
+            r = index[np.broadcast_to((F + a * n)[:, :, None], stiffness.shape)]
+            c = index[np.broadcast_to((F + b * n)[:, None, :], stiffness.shape)]
+            keep = (r >= 0) & (c >= 0)
+            rows.append(r[keep])
+            cols.append(c[keep])
+            vals.append((W2[:, a, b][:, None, None] * stiffness)[keep])
+    k = int(free.sum())
+    return sp.csc_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(k, k)
+    )
+
+
+def _scatter_rows(D: sp.csr_matrix, faces: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """``D^T`` applied to per-triangle row vectors ``g`` (``(k, 2)``: one uv coordinate's
+    ``d/dJ`` row of each triangle in ``faces``): the gradient over the vertex values."""
+    out = np.zeros(2 * (D.shape[0] // 2))
+    out[(2 * faces[:, None] + np.arange(2)).ravel()] = g.ravel()
+    return D.T @ out
+
+
+def _gradient_coefficients(frames: np.ndarray) -> np.ndarray:
+    """``g`` (m, 2, 3): column ``k`` of triangle t's Jacobian is ``sum_j g[t, k, j] x[F[t, j]]``
+    for one uv coordinate ``x`` (``J = [q1 q2] frames[t]``, ``q_j = uv[F_j] - uv[F_0]``)."""
+    return np.stack([-frames[:, 0, :] - frames[:, 1, :], frames[:, 0, :], frames[:, 1, :]], axis=2)
+
+
+def _gradient_rows(F: np.ndarray, frames: np.ndarray, n: int) -> sp.csr_matrix:
+    """``D`` (2m x n): row ``2t + k`` holds ``g[t, k]`` (:func:`_gradient_coefficients`) at the
+    columns ``F[t]``."""
+    m = len(F)
+    rows = np.repeat(2 * np.arange(m)[:, None] + np.arange(2), 3, axis=1).reshape(m, 2, 3)
+    cols = np.broadcast_to(F[:, None, :], (m, 2, 3))
+    vals = _gradient_coefficients(frames)
+    return sp.csr_matrix((vals.ravel(), (rows.ravel(), cols.ravel())), shape=(2 * m, n))
