@@ -304,7 +304,8 @@ def parameterize_charts(
     sources = [order[bounds[s] : bounds[s + 1]] for s in range(n_src)]
     sub = _submeshes(F, labels, order, bounds)
     # Small charts, all at once: already in mesh indices and units.
-    final = _bulk_charts(V, F, sub, order, bounds, cfg, size)
+    bulk_rejected = np.zeros(n_src, dtype=bool)
+    final = _bulk_charts(V, F, sub, order, bounds, cfg, size, bulk_rejected)
     if progress is not None and final:
         progress(len(final))
     in_bulk = np.zeros(n_src, dtype=bool)
@@ -346,10 +347,9 @@ def parameterize_charts(
             raise
         pool.shutdown()
     else:
-        for done, src in enumerate(rest, len(final) + 1):  # loop over the charts left
-            results[src] = _solve_source(*task(src), cfg, seed)
-            if progress is not None:
-                progress(done)
+        results = _solve_in_rounds(
+            V, F, rest, sources, sub, affinity, cfg, seed, size, bulk_rejected, progress, len(final)
+        )
 
     for src in rest:  # back to mesh indices and units
         faces = sources[src]
@@ -460,6 +460,7 @@ def _bulk_charts(
     bounds: np.ndarray,
     cfg: SplitConfig,
     size: float,
+    rejected: np.ndarray | None = None,
 ) -> dict[int, tuple[list[Chart], bool]]:
     """The small segmentation charts that map on their first try, mapped all at once.
 
@@ -476,8 +477,10 @@ def _bulk_charts(
       ``max_distortion`` and ``max_stretch``: ``"hessian"``.
 
     A chart that fails any of these is not in the result: the per-chart path maps or splits it,
-    as before. ``V`` is in the stage's unit frame; the charts returned are in mesh indices and
-    units (``uv * size``).
+    as before. Where :func:`_try_piece` could only fail the same way (a small chart whose
+    projection folds, a chart the solver mapped outside the targets), ``rejected[chart]`` is set
+    (when given), so that the caller can split it without trying it again. ``V`` is in the
+    stage's unit frame; the charts returned are in mesh indices and units (``uv * size``).
 
     Returns
     -------
@@ -549,6 +552,8 @@ def _bulk_charts(
         planar_ok[proj[ok & c_planar[proj]]] = True
         emit(proj, vc, uv, q, ok & c_small[proj], "projection")
         emit(proj, vc, uv, q, ok & c_planar[proj], "planar")
+        if rejected is not None:
+            rejected[cand[proj[~ok & c_small[proj]]]] = True
     # The solver, on the small non-planar charts (and planar ones whose projection folds).
     go = solver[cand] & manifold & (topo["loops"] >= 1) & ~planar_ok & ~(c_planar & ~disk)
     if go.any():
@@ -570,6 +575,8 @@ def _bulk_charts(
         q = maps.quality
         ok &= _within_targets(q["angle_distortion"], q["l2_stretch"], nf[cand][take], cfg)
         emit(take, vc, maps.uv, maps.quality, ok, "hessian")
+        if rejected is not None:
+            rejected[cand[take[~ok]]] = True
     return out
 
 
@@ -614,6 +621,89 @@ def _within_targets(angle, l2, n_faces, cfg: SplitConfig):
     if cfg.max_stretch is not None:
         ok &= (np.asarray(l2) <= cfg.max_stretch) | (np.asarray(n_faces) < STRETCH_MIN_FACES)
     return ok
+
+
+def _solve_in_rounds(
+    V: np.ndarray,
+    F: np.ndarray,
+    rest: list[int],
+    sources: list[np.ndarray],
+    sub: _Submeshes,
+    affinity: _MeshAffinity,
+    cfg: SplitConfig,
+    seed: int,
+    size: float,
+    bulk_rejected: np.ndarray,
+    progress: Callable[[int], None] | None,
+    done: int,
+) -> dict[int, tuple[list[Chart], bool]]:
+    """:func:`_solve_source` for every chart in `rest`, in one process, a split depth at a time.
+
+    Each round tries every piece left: the small ones (at most ``BATCH_MAX_VERTICES`` vertices)
+    all at once through :func:`_bulk_charts`, the others one by one (:func:`_try_piece`); the
+    pieces that fail are bisected (:func:`segparam.segment.divide`) for the next round. The
+    pieces a split makes are mostly small, and one solver call each cost ~20 ms of set-up
+    (measured on the plate's hole walls and the cortex with a stretch target). A chart the bulk
+    pass already rejected (``bulk_rejected``) is bisected at once. Returns what
+    :func:`_solve_source` returns, per chart: pieces in chart-local indices and units, sorted as
+    its depth-first bisection would emit them.
+    """
+    m = len(F)
+    pos = np.empty(m, dtype=np.int64)  # each face's index in its chart's face list
+    for src in rest:  # loop over the charts left: index arrays
+        pos[sources[src]] = np.arange(len(sources[src]))
+    pieces: dict[int, list[tuple[tuple, Chart]]] = {src: [] for src in rest}
+    first = dict.fromkeys(rest, False)
+    W: dict[int, sp.csr_matrix] = {}
+    # (chart, faces in chart-local indices, depth, path of bisection choices, bulk tried it)
+    pending = [(src, np.arange(len(sources[src])), 0, (), bool(bulk_rejected[src])) for src in rest]
+    open_pieces = dict.fromkeys(rest, 1)
+    while pending:
+        nverts = [len(np.unique(sub.of(src)[1][faces])) for src, faces, *_ in pending]
+        batch = [
+            k for k, (_, _, depth, _, tried) in enumerate(pending)
+            if 0 < depth <= cfg.max_depth and not tried and nverts[k] <= BATCH_MAX_VERTICES
+        ]  # fmt: skip
+        mapped, rejected = {}, np.zeros(len(batch), dtype=bool)
+        if batch:
+            order = np.concatenate([sources[pending[k][0]][pending[k][1]] for k in batch])
+            bounds = np.r_[0, np.cumsum([len(pending[k][1]) for k in batch])]
+            labels = np.zeros(m, dtype=np.int64)
+            labels[order] = np.repeat(np.arange(len(batch)), np.diff(bounds))
+            sub_b = _submeshes(F, labels, order, bounds)
+            got = _bulk_charts(V, F, sub_b, order, bounds, cfg, size, rejected)
+            mapped = {batch[i]: got[i][0][0] for i in got}
+        rejected_at = {batch[i] for i in np.flatnonzero(rejected)}
+        nxt = []
+        for k, (src, faces, depth, path, tried) in enumerate(pending):  # loop over pieces
+            vertices, local_F = sub.of(src)
+            if k in mapped:  # back from mesh to chart-local indices and units
+                c = mapped[k]
+                chart = dataclasses.replace(
+                    c, faces=pos[c.faces], vertices=np.searchsorted(vertices, c.vertices),
+                    uv=c.uv / size, source=src, depth=depth,
+                )  # fmt: skip
+            elif tried or k in rejected_at:
+                chart = None
+            else:
+                chart = _try_piece(V[vertices], local_F, faces, src, depth, cfg, seed)
+            if depth == 0:
+                first[src] = chart is not None and chart.method != "projection"
+            open_pieces[src] -= 1
+            if chart is not None:
+                pieces[src].append((path, chart))
+            else:
+                if src not in W:
+                    W[src] = affinity.of_chart(sources[src], now=False)()
+                parts = [p for p in divide(W[src], faces, seed=seed) if len(p)]
+                nxt.extend((src, p, depth + 1, (*path, i), False) for i, p in enumerate(parts))
+                open_pieces[src] += len(parts)
+            if open_pieces[src] == 0 and progress is not None:
+                done += 1
+                progress(done)
+        pending = nxt
+    return {src: ([c for _, c in sorted(pieces[src], key=lambda t: t[0])], first[src])
+            for src in rest}  # fmt: skip
 
 
 def _solve_source(
