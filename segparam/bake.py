@@ -44,6 +44,7 @@ __all__ = [
     "mean_curvature",
     "normal_colors",
     "pull_push",
+    "value_range",
 ]
 
 # The built-in sources of `--bake NAME`; anything else is a per-vertex data file.
@@ -524,7 +525,7 @@ def bake_named(atlas, name: str, *, input_path=None, resolution: int | None = No
         source = str(name)
     if scalar is not None:
         image, _ = bake(atlas.V, atlas.F, atlas.uv, atlas.uv_F, scalar, R)
-        rgb, scale = colorize(image, vrange=_robust_range(scalar))
+        rgb, scale = colorize(image, vrange=value_range(scalar))
         values = scalar
     else:
         image, _ = bake(atlas.V, atlas.F, atlas.uv, atlas.uv_F, values, R)
@@ -532,7 +533,7 @@ def bake_named(atlas, name: str, *, input_path=None, resolution: int | None = No
     return Baked(_bake_label(name), rgb, values, scalar, scale, source)
 
 
-def _robust_range(x: np.ndarray) -> tuple[float, float]:
+def value_range(x: np.ndarray) -> tuple[float, float]:
     """The colour range of per-vertex values: :data:`ROBUST_PERCENTILES`, symmetric about 0 when
     the values take both signs (so 0 is the diverging scale's white)."""
     lo, hi = (float(p) for p in np.percentile(x[np.isfinite(x)], ROBUST_PERCENTILES))
