@@ -94,12 +94,13 @@ def camera_for(V: np.ndarray, azimuth: float, elevation: float, size: int) -> Ca
 
 
 @njit(cache=True, nogil=True)
-def _raster_kernel(S, F, invw_buf, face_buf, bary_buf):  # pragma: no cover - compiled
+def _raster_kernel(S, F, T, invw_buf, face_buf, uv_buf):  # pragma: no cover - compiled
     """Z-buffered rasterization of triangles with screen positions S (x, y, 1/w).
 
     A pixel centre inside a triangle (edge functions of one sign: both windings are drawn)
-    whose interpolated 1/w is larger (nearer) than the buffer's takes the face and its
-    perspective-correct barycentrics ``(l_k / w_k) / sum_j (l_j / w_j)``.
+    whose interpolated 1/w is larger (nearer) than the buffer's takes the face and the uv
+    ``T[t]`` (corner uvs) interpolated with perspective-correct barycentrics
+    ``(l_k / w_k) / sum_j (l_j / w_j)``.
     """
     H, W = invw_buf.shape
     for t in range(F.shape[0]):
@@ -129,8 +130,8 @@ def _raster_kernel(S, F, invw_buf, face_buf, bary_buf):  # pragma: no cover - co
                 if iw > invw_buf[r, q]:
                     invw_buf[r, q] = iw
                     face_buf[r, q] = t
-                    bary_buf[r, q, 0] = pb / iw
-                    bary_buf[r, q, 1] = pc / iw
+                    for k in range(2):
+                        uv_buf[r, q, k] = (pa * T[t, 0, k] + pb * T[t, 1, k] + pc * T[t, 2, k]) / iw
 
 
 @njit(cache=True, nogil=True)
@@ -176,36 +177,41 @@ def render_view(
     *,
     seams: np.ndarray | None = None,
     shade: bool = True,
+    normals: np.ndarray | None = None,
 ) -> np.ndarray:
     """One view, (size, size, 3) uint8: texture by perspective-correct uv (nearest texel),
-    headlight shading, seams on top; background :data:`BACKGROUND`."""
+    headlight shading by face normal, seams on top; background :data:`BACKGROUND`.
+
+    ``normals`` (m, 3), the unit face normals, may be passed when rendering several views.
+    """
     size = camera.size
-    S = camera.project(V)
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    S = np.ascontiguousarray(camera.project(V))
+    T = np.ascontiguousarray(np.asarray(uv, dtype=np.float64)[np.asarray(face_uv, dtype=np.int64)])
     invw = np.zeros((size, size))
     face = np.full((size, size), -1, dtype=np.int64)
-    bary = np.zeros((size, size, 2))
-    _raster_kernel(np.ascontiguousarray(S), np.ascontiguousarray(F, np.int64), invw, face, bary)
+    uvs = np.zeros((size, size, 2))
+    _raster_kernel(S, F, T, invw, face, uvs)
     out = np.empty((size, size, 3), dtype=np.uint8)
     out[:] = BACKGROUND
     hit = face >= 0
-    f = face[hit]
-    b1, b2 = bary[hit, 0], bary[hit, 1]
-    T = np.asarray(uv, dtype=np.float64)[np.asarray(face_uv, dtype=np.int64)[f]]  # (p, 3, 2)
-    U = T[:, 0] + b1[:, None] * (T[:, 1] - T[:, 0]) + b2[:, None] * (T[:, 2] - T[:, 0])
+    U = uvs[hit]
     th, tw = texture.shape[:2]
     col = np.clip((U[:, 0] * tw).astype(np.int64), 0, tw - 1)
     row = np.clip(((1.0 - U[:, 1]) * th).astype(np.int64), 0, th - 1)  # picture order
-    rgb = texture[row, col, :3].astype(np.float64)
     if shade:
-        P = np.asarray(V, dtype=np.float64)[np.asarray(F, dtype=np.int64)[f]]
-        n = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-        rgb *= (AMBIENT + (1 - AMBIENT) * np.abs(n @ camera.forward))[:, None]
-    out[hit] = np.clip(np.round(rgb), 0, 255).astype(np.uint8)
+        from .mesh import face_normals
+
+        N = face_normals(np.asarray(V, dtype=np.float64), F) if normals is None else normals
+        light = AMBIENT + (1 - AMBIENT) * np.abs(N @ camera.forward)  # per face
+        rgb = texture[row, col, :3] * light[face[hit]][:, None]
+        out[hit] = np.minimum(rgb + 0.5, 255).astype(np.uint8)
+    else:
+        out[hit] = texture[row, col, :3]
     if seams is not None and len(seams):
         mark = np.zeros((size, size), dtype=np.bool_)
         E = np.ascontiguousarray(seams, dtype=np.int64)
-        _seam_kernel(np.ascontiguousarray(S), E, invw, SEAM_DEPTH_TOLERANCE, mark)
+        _seam_kernel(S, E, invw, SEAM_DEPTH_TOLERANCE, mark)
         out[mark] = SEAM_COLOR
     return out
 
