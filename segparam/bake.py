@@ -35,6 +35,7 @@ __all__ = [
     "BakeError",
     "Baked",
     "bake",
+    "bake_label",
     "bake_named",
     "carry_to_atlas",
     "colorize",
@@ -213,23 +214,45 @@ def bake(
 
 
 def _mixed_areas(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """A third of the adjacent triangles' area at every vertex (the barycentric cell)."""
-    return np.bincount(F.ravel(), weights=np.repeat(face_areas(V, F) / 3, 3), minlength=len(V))
+    """The mixed Voronoi area of every vertex (Meyer et al. 2003, fig. 4): the Voronoi region
+    within each non-obtuse triangle, ``(|e_ij|^2 cot k + |e_ik|^2 cot j) / 8``, and for an
+    obtuse triangle half its area at the obtuse corner, a quarter at the other two."""
+    ang = corner_angles(V, F)
+    area = face_areas(V, F)
+    P = np.asarray(V, dtype=np.float64)[F]
+    # squared length of the edge opposite corner k
+    sq = np.stack([((P[:, (k + 2) % 3] - P[:, (k + 1) % 3]) ** 2).sum(axis=1) for k in range(3)], 1)
+    cot = 1.0 / np.tan(np.clip(ang, 1e-8, np.pi - 1e-8))
+    # corner k gets the two edges at it: opposite k+1 (cot at k+1) and opposite k+2 (cot at k+2)
+    voronoi = np.stack(
+        [
+            (sq[:, (k + 1) % 3] * cot[:, (k + 1) % 3] + sq[:, (k + 2) % 3] * cot[:, (k + 2) % 3])
+            / 8
+            for k in range(3)
+        ],
+        axis=1,
+    )
+    obtuse = ang > np.pi / 2
+    share = np.where(obtuse, area[:, None] / 2, area[:, None] / 4)
+    corner = np.where(obtuse.any(axis=1)[:, None], share, voronoi)
+    return np.bincount(F.ravel(), weights=corner.ravel(), minlength=len(V))
 
 
 def gaussian_curvature(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Discrete Gaussian curvature: angle defect over the vertex's barycentric area (1/length^2)."""
+    """Discrete Gaussian curvature: angle defect over the vertex's mixed area (1/length^2)."""
     A = _mixed_areas(V, F)
     return np.divide(angle_defect(V, F), A, out=np.zeros(len(V)), where=A > 0)
 
 
 def mean_curvature(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Signed discrete mean curvature ``H = |Delta x| / 2`` (cotangent Laplacian, 1/length).
+    """Signed discrete mean curvature ``H = -(Delta x . n) / 2`` (cotangent Laplacian, 1/length).
 
-    ``Delta x = (1 / 2A) sum_j (cot a_ij + cot b_ij)(x_j - x_i)`` (Meyer et al. 2003); the sign is
-    positive where ``Delta x`` points against the outward normal (convex, like a sphere seen
-    from outside: the gyri of a cortical surface), negative in concave parts (sulci). Boundary
-    vertices get the same formula over their one-sided ring.
+    ``Delta x = (1 / 2A) sum_j (cot a_ij + cot b_ij)(x_j - x_i)`` with A the mixed area (Meyer
+    et al. 2003) is the mean-curvature normal ``-2 H n``; ``H`` from its component along the
+    area-weighted vertex normal n is positive where convex (a sphere seen from outside, the gyri of a
+    cortical surface) and negative where concave (sulci). Taking the normal component, not
+    ``|Delta x|``, keeps boundary vertices sensible: their one-sided ring adds a large
+    tangential part to ``Delta x`` and little normal part.
     """
     V = np.asarray(V, dtype=np.float64)
     ang = corner_angles(V, F)
@@ -244,8 +267,7 @@ def mean_curvature(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     A = _mixed_areas(V, F)
     lap = np.divide(lap, 2 * A[:, None], out=np.zeros_like(lap), where=A[:, None] > 0)
     N = vertex_normals(V, F, weighting="area")
-    sign = np.where((lap * N).sum(axis=1) < 0, 1.0, -1.0)
-    return sign * np.linalg.norm(lap, axis=1) / 2
+    return -(lap * N).sum(axis=1) / 2
 
 
 def normal_colors(V: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -446,7 +468,7 @@ def carry_to_atlas(atlas, values: np.ndarray) -> np.ndarray:
     Cleaning keeps input positions (``cleaning.vertex_index`` names each cleaned vertex's input
     vertex), so without remeshing the values map one to one. With remeshing every atlas vertex
     takes the barycentric interpolation of the cleaned mesh's values at its closest point on
-    the cleaned surface (trimesh's ``closest_point``).
+    the cleaned surface (:func:`interpolate_at_closest`).
     """
     values = np.asarray(values, dtype=np.float64)
     cleaning = atlas.cleaning
@@ -461,19 +483,72 @@ def carry_to_atlas(atlas, values: np.ndarray) -> np.ndarray:
     return interpolate_at_closest(cleaning.V, cleaning.F, on_clean, atlas.V)
 
 
+# Candidate faces per query point in the closest-point search: the faces with the nearest
+# centroids. Remeshed vertices lie within a fraction of an edge of the input surface, where the
+# closest face is always among the few nearest centroids; 16 leaves a wide margin.
+CLOSEST_CANDIDATES = 16
+
+
+def _closest_on_triangles(P, A, B, C):
+    """Barycentric weights (..., 3) of the point of triangle ABC closest to P (Ericson,
+    *Real-Time Collision Detection*, 5.1.5: vertex, edge or face region), all at once."""
+    ab, ac, ap = B - A, C - A, P - A
+    bp, cp = P - B, P - C
+
+    def dot(x, y):
+        return (x * y).sum(axis=-1)
+
+    d1, d2 = dot(ab, ap), dot(ac, ap)
+    d3, d4 = dot(ab, bp), dot(ac, bp)
+    d5, d6 = dot(ab, cp), dot(ac, cp)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        denom = va + vb + vc
+        v = np.where(denom != 0, vb / denom, 1 / 3)
+        w = np.where(denom != 0, vc / denom, 1 / 3)
+        out = np.stack([1 - v - w, v, w], axis=-1)  # inside the face
+        # edge and vertex regions; later assignments take precedence (Ericson's test order)
+        t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        t_ac = d2 / (d2 - d6)
+        t_ab = d1 / (d1 - d3)
+        zero = np.zeros_like(d1)
+        regions = [
+            ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), (zero, 1 - t_bc, t_bc)),
+            ((vb <= 0) & (d2 >= 0) & (d6 <= 0), (1 - t_ac, zero, t_ac)),
+            ((d6 >= 0) & (d5 <= d6), (zero, zero, zero + 1)),
+            ((vc <= 0) & (d1 >= 0) & (d3 <= 0), (1 - t_ab, t_ab, zero)),
+            ((d3 >= 0) & (d4 <= d3), (zero, zero + 1, zero)),
+            ((d1 <= 0) & (d2 <= 0), (zero + 1, zero, zero)),
+        ]
+        for mask, weights in regions:  # six regions
+            out = np.where(mask[..., None], np.stack(weights, axis=-1), out)
+    return np.nan_to_num(out, nan=1 / 3)
+
+
 def interpolate_at_closest(
     V: np.ndarray, F: np.ndarray, values: np.ndarray, Q: np.ndarray
 ) -> np.ndarray:
-    """Per-vertex ``values`` of mesh (V, F) interpolated at the closest surface point of each Q."""
-    import trimesh
+    """Per-vertex ``values`` of mesh (V, F) interpolated at the closest surface point of each Q.
 
-    mesh = trimesh.Trimesh(V, F, process=False)
-    points, _, tri = trimesh.proximity.closest_point(mesh, Q)
-    bary = trimesh.triangles.points_to_barycentric(V[F[tri]], points)
-    bary = np.clip(np.nan_to_num(bary), 0.0, None)
-    bary /= np.maximum(bary.sum(axis=1, keepdims=True), 1e-300)
-    W = values[F[tri]]  # (q, 3) or (q, 3, C)
-    return np.einsum("qk,qk...->q...", bary, W)
+    Candidates are the :data:`CLOSEST_CANDIDATES` faces with the nearest centroids (scipy's
+    cKDTree); the exact closest point on each, the nearest of them wins, and the values of its
+    three corners are mixed with that point's barycentric weights.
+    """
+    from scipy.spatial import cKDTree
+
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64)
+    Q = np.asarray(Q, dtype=np.float64)
+    k = min(CLOSEST_CANDIDATES, len(F))
+    _, cand = cKDTree(V[F].mean(axis=1)).query(Q, k=k)
+    cand = cand.reshape(len(Q), k)
+    T = V[F[cand]]  # (q, k, 3 corners, 3)
+    bary = _closest_on_triangles(Q[:, None], T[:, :, 0], T[:, :, 1], T[:, :, 2])
+    points = np.einsum("qkc,qkcd->qkd", bary, T)
+    best = np.argmin(((points - Q[:, None]) ** 2).sum(axis=-1), axis=1)
+    rows = np.arange(len(Q))
+    face, w = cand[rows, best], bary[rows, best]
+    return np.einsum("qc,qc...->q...", w, np.asarray(values, dtype=np.float64)[F[face]])
 
 
 @dataclass(frozen=True)
@@ -530,7 +605,7 @@ def bake_named(atlas, name: str, *, input_path=None, resolution: int | None = No
     else:
         image, _ = bake(atlas.V, atlas.F, atlas.uv, atlas.uv_F, values, R)
         rgb = np.round(np.clip(image, 0, 1) * 255).astype(np.uint8)
-    return Baked(_bake_label(name), rgb, values, scalar, scale, source)
+    return Baked(bake_label(name), rgb, values, scalar, scale, source)
 
 
 def value_range(x: np.ndarray) -> tuple[float, float]:
@@ -543,7 +618,7 @@ def value_range(x: np.ndarray) -> tuple[float, float]:
     return (lo, hi) if hi > lo else (lo - 0.5, lo + 0.5)
 
 
-def _bake_label(name: str) -> str:
+def bake_label(name: str) -> str:
     """The file-name part of a bake: the built-in name, or the data file's name without its
     extensions (``lh.thickness`` stays, ``sub-01.func.gii`` -> ``sub-01``)."""
     if name in BAKE_NAMES:
