@@ -918,7 +918,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
 # Where the outputs go: checked before any work, so that a run never fails at the end for it
 
 #: What segparam appends to the stem of every file of an atlas folder (and ``report.json``).
-ATLAS_SUFFIXES = (".obj", ".mtl", "_checker.png", ".glb", "_uv.png")
+ATLAS_SUFFIXES = (".obj", ".mtl", "_checker.png", ".glb", "_uv.png", "_preview.png", ".html")
 #: File-name limit (bytes) assumed where the file system does not say (ext4, APFS, NTFS: 255).
 DEFAULT_NAME_MAX = 255
 
@@ -990,14 +990,18 @@ def atlas_stem(stem: str, outdir: str | os.PathLike) -> str:
     return fit_name(stem, limit=name_max(outdir) - longest)
 
 
-def atlas_file_names(stem: str) -> dict[str, str]:
-    """The files :func:`save_atlas` writes into its folder, by role."""
+def atlas_file_names(stem: str, pictures=None) -> dict[str, str]:
+    """The files :func:`save_atlas` writes into its folder, by role; ``pictures`` (a
+    :class:`segparam.pictures.PictureOptions`, default: preview and viewer) adds its files."""
+    from .pictures import PictureOptions
+
     return {
         "obj": f"{stem}.obj",
         "mtl": f"{stem}.mtl",
         "checker": f"{stem}_checker.png",
         "glb": f"{stem}.glb",
         "uv": f"{stem}_uv.png",
+        **(PictureOptions() if pictures is None else pictures).file_names(stem),
         "report": "report.json",
     }
 
@@ -1322,9 +1326,12 @@ def _png_bytes(pixels: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def save_atlas(atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: int | None = None):
+def save_atlas(
+    atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: int | None = None, pictures=None
+):
     """Write an atlas into ``outdir``: ``<stem>.obj/.mtl/_checker.png``, ``<stem>.glb``,
-    ``<stem>_uv.png`` and ``report.json``.
+    ``<stem>_uv.png``, the pictures of ``pictures`` (:class:`segparam.pictures.PictureOptions`;
+    default ``<stem>_preview.png`` and ``<stem>.html``) and ``report.json``.
 
     The folder is checked first (:func:`check_output_folder`); a stem too long for the file
     system is shortened (:func:`atlas_stem`). Every file is then written into a staging folder
@@ -1350,10 +1357,24 @@ def save_atlas(atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: in
     if not stem or stem in (".", "..") or "/" in stem or os.sep in stem:
         raise MeshFileError(f"stem {stem!r} is not a file name")
     stem = atlas_stem(stem, outdir)
-    names = atlas_file_names(stem)
+    from .pictures import PictureOptions, make_pictures
+
+    pictures = PictureOptions() if pictures is None else pictures
+    names = atlas_file_names(stem, pictures)
     check_output_folder(outdir, names.values())
     size = size or atlas.packing.resolution
     try:
+        # the pictures are made before anything is written: a failure leaves no file
+        layout = render_uv_layout(atlas.uv, atlas.uv_F, labels=atlas.chart_of_face, size=size)
+        uv_png = _png_bytes(np.asarray(layout))
+        extra, pictures_info = make_pictures(
+            atlas, stem, pictures, checker_png=_checker_png(1024), uv_png=uv_png
+        )
+        report = atlas.report()
+        seconds = pictures_info.pop("seconds")
+        timings = {**report.get("timings", {}), **{f"picture {k}": v for k, v in seconds.items()}}
+        report["timings"] = timings
+        report["pictures"] = pictures_info
         with staged_outputs(outdir) as stage:
             checker = _checker_png(1024)
             (stage / names["checker"]).write_bytes(checker)
@@ -1373,10 +1394,11 @@ def save_atlas(atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: in
             (stage / names["glb"]).write_bytes(
                 _glb_bytes(atlas.V[atlas.uv_vertex], atlas.uv_F, atlas.uv, checker)
             )
-            layout = render_uv_layout(atlas.uv, atlas.uv_F, labels=atlas.chart_of_face, size=size)
-            layout.save(stage / names["uv"], format="PNG")
+            (stage / names["uv"]).write_bytes(uv_png)
+            for name, data in extra.items():
+                (stage / name).write_bytes(data)
             (stage / names["report"]).write_text(
-                json.dumps(atlas.report(), indent=1, sort_keys=False) + "\n", encoding="utf-8"
+                json.dumps(report, indent=1, sort_keys=False) + "\n", encoding="utf-8"
             )
     except MeshFileError:
         raise

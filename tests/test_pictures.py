@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import json
 
 import numpy as np
 import pytest
@@ -62,7 +63,7 @@ def test_make_pictures_every_file(small_atlas, tmp_path):
     np.testing.assert_allclose(named["lh.thickness"], thickness[atlas.uv_vertex], rtol=1e-6)
     page = files["b.html"].decode()
     assert page.count("data:image/png;base64,") == 5  # checker, 3 bakes, uv layout
-    assert "preview" in info["seconds"] and "viewer" in info["seconds"]
+    assert "preview" in info["seconds"] and "viewer" in info["seconds"]  # -> report timings
 
 
 def test_no_pictures(small_atlas):
@@ -127,3 +128,88 @@ def test_carry_to_a_remeshed_atlas():
 def test_flat_default():
     assert flat_default("lh.pial.gii") and flat_default("x.GII.gz")
     assert not flat_default("x.obj") and not flat_default(None)
+
+
+# ---------------------------------------------------------------------------------------------
+# segparam atlas: --bake, --no-preview, --no-viewer, --flat
+
+
+def grid_file(path):
+    from meshes import tri_grid
+
+    from segparam.io import write_obj
+
+    V, F = tri_grid(12, 10)
+    V[:, 2] = 0.2 * np.sin(3 * V[:, 0])
+    write_obj(path, V, F)
+    return path, V
+
+
+def test_cli_bake_of_the_wrong_length_refused_before_the_work(tmp_path, capsys, monkeypatch):
+    import segparam.pipeline
+    from segparam.cli import main
+
+    source, V = grid_file(tmp_path / "g.obj")
+    np.save(tmp_path / "d.npy", np.zeros(len(V) + 1))
+
+    def work(*args, **kwargs):
+        raise AssertionError("the pipeline ran although --bake was bad")
+
+    monkeypatch.setattr(segparam.pipeline, "build_atlas", work)
+    out = tmp_path / "out"
+    code = main(["atlas", str(source), "-o", str(out), "--bake", str(tmp_path / "d.npy")])
+    lines = capsys.readouterr().err.splitlines()
+    assert code == 2 and len(lines) == 1, lines
+    assert f"{len(V) + 1} values, but the input mesh has {len(V)} vertices" in lines[0]
+    assert not out.exists()
+
+
+def test_cli_pictures_on_and_off(tmp_path, capsys):
+    from segparam.cli import main
+
+    source, V = grid_file(tmp_path / "g.obj")
+    np.savetxt(tmp_path / "d.csv", V[:, 0])
+    fast = ["--resolution", "128", "--no-remesh", "--quiet"]
+    out = tmp_path / "a"
+    assert (
+        main(["atlas", str(source), "-o", str(out), *fast, "--bake", str(tmp_path / "d.csv")]) == 0
+    )
+    names = sorted(p.name for p in out.iterdir())
+    assert names == sorted(
+        ["g.obj", "g.mtl", "g.glb", "g_checker.png", "g_uv.png", "report.json"]
+        + ["g_preview.png", "g.html", "g_d.png"]
+    )
+    report = json.loads((out / "report.json").read_text())
+    assert report["pictures"]["bakes"][0]["file"] == "g_d.png"
+    out = tmp_path / "b"
+    assert main(["atlas", str(source), "-o", str(out), *fast, "--no-preview", "--no-viewer"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        ["g.obj", "g.mtl", "g.glb", "g_checker.png", "g_uv.png", "report.json"]
+    )
+
+
+def test_cli_gifti_input_gets_flat_maps(tmp_path, capsys):
+    import nibabel as nib
+
+    from segparam.cli import main
+
+    V, F = brain_like_surface(1000)
+    arrays = [
+        nib.gifti.GiftiDataArray(V.astype(np.float32), intent="NIFTI_INTENT_POINTSET"),
+        nib.gifti.GiftiDataArray(F.astype(np.int32), intent="NIFTI_INTENT_TRIANGLE"),
+    ]
+    source = tmp_path / "lh.pial.gii"
+    nib.save(nib.gifti.GiftiImage(darrays=arrays), str(source))
+    thickness = tmp_path / "lh.thickness"
+    nib.freesurfer.write_morph_data(str(thickness), np.linspace(1, 4, len(V)).astype(np.float32))
+    out = tmp_path / "out"
+    argv = ["atlas", str(source), "-o", str(out), "--resolution", "128", "--no-remesh"]
+    assert main([*argv, "--quiet", "--bake", str(thickness)]) == 0
+    img = nib.load(str(out / "lh.pial_flat.gii"))
+    coords = img.agg_data("pointset")
+    uv_rows = len(coords)
+    assert uv_rows >= len(V) and np.all(coords[:, 2] == 0)
+    named = {d.meta.get("Name"): d.data for d in img.darrays[2:]}
+    index = named["vertex_index"]
+    np.testing.assert_allclose(named["lh.thickness"], np.linspace(1, 4, len(V))[index], rtol=1e-6)
+    assert (out / "lh.pial_flatmap.png").exists() and (out / "lh.pial_lh.thickness.png").exists()
