@@ -12,7 +12,8 @@ each picture is made ``--repeat`` times and the minimum wall time kept:
 ``flatmap``
     ``render_flatmap`` of the curvature (no data layer) at the atlas resolution.
 ``viewer``
-    ``viewer_html`` with the checker and the curvature texture (PNG encoding included).
+    ``viewer_html`` with the checker and the curvature texture as PNG bytes (as the atlas
+    writer passes them: encoded once for their own files).
 ``flat.gii``
     ``write_flat_gifti`` with the curvature as a data array.
 
@@ -37,7 +38,7 @@ import numpy as np
 
 from segparam.bake import bake_named
 from segparam.flatmap import render_flatmap, write_flat_gifti
-from segparam.io import _checker_pixels
+from segparam.io import _checker_pixels, _png_bytes
 from segparam.pipeline import build_atlas, load_config
 from segparam.render import render_preview
 from segparam.synthetic import brain_like_surface
@@ -70,8 +71,9 @@ def _xatlas_seconds(V, F) -> float | None:
 
 
 def _pictures(atlas, repeat: int, folder: Path) -> dict[str, float]:
-    checker = _checker_pixels(1024, 16)
+    checker = _png_bytes(_checker_pixels(1024, 16))
     curv = bake_named(atlas, "curvature")
+    curv_png = _png_bytes(curv.rgb)
     uv_values = curv.values[atlas.uv_vertex]
     return {
         "preview": _best(lambda: render_preview(atlas.V, atlas.F, atlas.uv, atlas.uv_F), repeat),
@@ -88,7 +90,7 @@ def _pictures(atlas, repeat: int, folder: Path) -> dict[str, float]:
                 atlas.F,
                 atlas.uv,
                 atlas.uv_F,
-                {"checker": checker, "curvature": curv.rgb},
+                {"checker": checker, "curvature": curv_png},
             ),
             repeat,
         ),
