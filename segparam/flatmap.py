@@ -5,6 +5,8 @@ chart) at ``(u, v, 0)`` with the atlas's triangles, and carries per-vertex data 
 arrays after the two geometry arrays, so nibabel and nilearn (``load_surf_mesh``) read the flat
 surface and the data from the same file (``<stem>_flat.gii``), the flat counterpart of
 pycortex's flatmaps that tools in the GIfTI world (Connectome Workbench, nilearn) can open.
+:func:`data_gifti` holds the same data alone (``<stem>_flat.func.gii``), for readers that take
+geometry and data from separate files (nilearn's ``load_surf_data``).
 
 :func:`render_flatmap` draws a scalar in the uv layout over curvature shading, the way pycortex
 draws cortical flatmaps: sulci dark grey, gyri light grey, the data's colours laid over them
@@ -20,7 +22,7 @@ import numpy as np
 
 from .bake import bake, colorize, mean_curvature, value_range
 
-__all__ = ["CURVATURE_WEIGHT", "flat_gifti", "render_flatmap", "write_flat_gifti"]
+__all__ = ["CURVATURE_WEIGHT", "data_gifti", "flat_gifti", "render_flatmap", "write_flat_gifti"]
 
 # How much of the curvature shading shows through the data's colours (pycortex draws its data
 # layer over the curvature layer with partial opacity; 0.3 keeps the colours readable).
@@ -92,6 +94,24 @@ def flat_gifti(
         )
     meta = GiftiMetaData({"AnatomicalStructureSecondary": "Flat", "GeometricType": "Flat"})
     return GiftiImage(darrays=arrays, meta=meta)
+
+
+def data_gifti(data: Mapping[str, np.ndarray]):
+    """Per-vertex data alone, one NIFTI_INTENT_SHAPE array each (named), as a GIfTI image:
+    the ``<stem>_flat.func.gii`` beside ``<stem>_flat.gii``, for tools that read geometry and
+    data from separate files (nilearn's ``load_surf_data`` gives a (k, arrays) matrix)."""
+    from nibabel.gifti import GiftiDataArray, GiftiImage, GiftiMetaData
+
+    arrays = [
+        GiftiDataArray(
+            np.asarray(values, dtype=np.float32),
+            intent="NIFTI_INTENT_SHAPE",
+            datatype="NIFTI_TYPE_FLOAT32",
+            meta=GiftiMetaData({"Name": str(name)}),
+        )
+        for name, values in data.items()  # a loop over the few named arrays
+    ]
+    return GiftiImage(darrays=arrays)
 
 
 def write_flat_gifti(

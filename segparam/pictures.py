@@ -2,7 +2,8 @@
 
 Which files (:class:`PictureOptions`): ``<stem>_preview.png`` (:mod:`segparam.render`),
 ``<stem>.html`` (:mod:`segparam.viewer`), ``<stem>_<NAME>.png`` per bake (:mod:`segparam.bake`)
-and, for cortical surfaces, ``<stem>_flat.gii`` and ``<stem>_flatmap.png``
+and, for cortical surfaces, ``<stem>_flat.gii``, ``<stem>_flat.func.gii`` and
+``<stem>_flatmap.png``
 (:mod:`segparam.flatmap`). :func:`check_bakes` refuses a bad ``--bake`` before any work;
 :func:`make_pictures` returns every file's bytes and the report's ``pictures`` section, so that
 the writer can put them into its staging folder with the other files (all or nothing).
@@ -44,7 +45,7 @@ class PictureOptions:
     bakes : tuple of str
         Built-in names (:data:`segparam.bake.BAKE_NAMES`) or per-vertex data files.
     flat : bool
-        ``<stem>_flat.gii`` and ``<stem>_flatmap.png``.
+        ``<stem>_flat.gii``, ``<stem>_flat.func.gii`` and ``<stem>_flatmap.png``.
     input_path : str, optional
         The input mesh file (``vertex-colors`` reads it).
     """
@@ -66,6 +67,7 @@ class PictureOptions:
             names[f"bake:{bake_label(name)}"] = f"{stem}_{bake_label(name)}.png"
         if self.flat:
             names["flat"] = f"{stem}_flat.gii"
+            names["flat_data"] = f"{stem}_flat.func.gii"
             names["flatmap"] = f"{stem}_flatmap.png"
         return names
 
@@ -103,7 +105,7 @@ def make_pictures(
 ) -> tuple[dict[str, bytes], dict[str, Any]]:
     """Every picture file of ``options`` for ``atlas``: ``{file name: bytes}`` and the report's
     ``pictures`` section (per bake: file, source, colour map and range; seconds per picture)."""
-    from .flatmap import flat_gifti, render_flatmap
+    from .flatmap import data_gifti, flat_gifti, render_flatmap
     from .render import render_preview
     from .viewer import viewer_html
 
@@ -140,6 +142,7 @@ def make_pictures(
                 data[b.name] = b.scalar[atlas.uv_vertex]
         img = flat_gifti(atlas.uv, atlas.uv_F, data, vertex_of_uv=atlas.uv_vertex)
         files[names["flat"]] = img.to_xml()
+        files[names["flat_data"]] = data_gifti(data).to_xml()
         # the first baked scalar other than curvature over the curvature shading (else none)
         shown = next((b for b in baked if b.scalar is not None and "curvature" not in b.name), None)
         rgb, scale = render_flatmap(

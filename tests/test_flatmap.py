@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 from meshes import spherical_cap, tri_grid
 
-from segparam.flatmap import GYRUS_GREY, SULCUS_GREY, render_flatmap, write_flat_gifti
+from segparam.flatmap import (
+    GYRUS_GREY,
+    SULCUS_GREY,
+    data_gifti,
+    render_flatmap,
+    write_flat_gifti,
+)
 
 
 def atlas_of_grid(n=8):
@@ -45,6 +51,19 @@ def test_flat_gifti_read_by_nilearn(tmp_path):
     write_flat_gifti(path, uv, F, {"data": uv[:, 0]})
     mesh = surface.load_surf_mesh(path)
     assert mesh.coordinates.shape == (len(uv), 3) and mesh.faces.shape == F.shape
+
+
+def test_flat_data_read_by_nilearn(tmp_path):
+    # nilearn takes data from data-only files: the <stem>_flat.func.gii companion
+    import nibabel as nib
+
+    surface = pytest.importorskip("nilearn.surface", reason="nilearn is in the bench extra")
+    V, F, uv = atlas_of_grid()
+    a, b = uv[:, 0], uv[:, 1] * 2
+    path = tmp_path / "x_flat.func.gii"
+    nib.save(data_gifti({"a": a, "b": b}), str(path))
+    got = surface.load_surf_data(path)
+    np.testing.assert_allclose(got, np.stack([a, b], axis=1), rtol=1e-6)
 
 
 def test_flat_gifti_refuses_data_of_the_wrong_length(tmp_path):

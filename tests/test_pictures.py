@@ -41,6 +41,7 @@ def test_make_pictures_every_file(small_atlas, tmp_path):
             "b_normals.png",
             "b_lh.thickness.png",
             "b_flat.gii",
+            "b_flat.func.gii",
             "b_flatmap.png",
         ]
     )
@@ -61,6 +62,9 @@ def test_make_pictures_every_file(small_atlas, tmp_path):
     assert list(named) == ["curvature", "lh.thickness", "vertex_index"]
     # --no-remesh: data map one to one, so the flat file holds the input's values per uv row
     np.testing.assert_allclose(named["lh.thickness"], thickness[atlas.uv_vertex], rtol=1e-6)
+    data_only = nib.gifti.GiftiImage.from_bytes(files["b_flat.func.gii"])
+    assert [d.meta.get("Name") for d in data_only.darrays] == ["curvature", "lh.thickness"]
+    np.testing.assert_array_equal(data_only.darrays[1].data, named["lh.thickness"])
     page = files["b.html"].decode()
     assert page.count("data:image/png;base64,") == 5  # checker, 3 bakes, uv layout
     assert "preview" in info["seconds"] and "viewer" in info["seconds"]  # -> report timings
@@ -213,3 +217,4 @@ def test_cli_gifti_input_gets_flat_maps(tmp_path, capsys):
     index = named["vertex_index"]
     np.testing.assert_allclose(named["lh.thickness"], np.linspace(1, 4, len(V))[index], rtol=1e-6)
     assert (out / "lh.pial_flatmap.png").exists() and (out / "lh.pial_lh.thickness.png").exists()
+    assert (out / "lh.pial_flat.func.gii").exists()
