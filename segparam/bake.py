@@ -249,10 +249,10 @@ def mean_curvature(V: np.ndarray, F: np.ndarray) -> np.ndarray:
 
     ``Delta x = (1 / 2A) sum_j (cot a_ij + cot b_ij)(x_j - x_i)`` with A the mixed area (Meyer
     et al. 2003) is the mean-curvature normal ``-2 H n``; ``H`` from its component along the
-    area-weighted vertex normal n is positive where convex (a sphere seen from outside, the gyri of a
-    cortical surface) and negative where concave (sulci). Taking the normal component, not
-    ``|Delta x|``, keeps boundary vertices sensible: their one-sided ring adds a large
-    tangential part to ``Delta x`` and little normal part.
+    area-weighted vertex normal n is positive where convex (a sphere seen from outside, the
+    gyri of a cortical surface) and negative where concave (sulci). Taking the normal
+    component, not ``|Delta x|``, keeps boundary vertices sensible: their one-sided ring adds
+    a large tangential part to ``Delta x`` and little normal part.
     """
     V = np.asarray(V, dtype=np.float64)
     ang = corner_angles(V, F)
