@@ -218,3 +218,14 @@ def test_cli_gifti_input_gets_flat_maps(tmp_path, capsys):
     np.testing.assert_allclose(named["lh.thickness"], np.linspace(1, 4, len(V))[index], rtol=1e-6)
     assert (out / "lh.pial_flatmap.png").exists() and (out / "lh.pial_lh.thickness.png").exists()
     assert (out / "lh.pial_flat.func.gii").exists()
+
+
+def test_top_level_names():
+    import segparam
+    from segparam.bake import bake
+    from segparam.render import render_preview
+
+    assert segparam.render_preview is render_preview
+    assert segparam.bake.bake is bake  # the module segparam.bake
+    with pytest.raises(AttributeError):
+        segparam.no_such_name  # noqa: B018
