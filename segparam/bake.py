@@ -20,6 +20,7 @@ centre at ``u = (j + 1/2) / R``, ``v = 1 - (i + 1/2) / R``.
 
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -102,6 +103,47 @@ def _bake_kernel(P, F, W, out, covered):  # pragma: no cover - compiled
                 covered[r, q] = True
 
 
+@njit(cache=True, nogil=True)
+def _pull(img, w):  # pragma: no cover - compiled
+    """One level up: per 2x2 block (the last row/column alone at odd sizes), the mean of the
+    block's covered texels, and whether it had any."""
+    h, wd, C = img.shape
+    H, W = (h + 1) // 2, (wd + 1) // 2
+    out = np.zeros((H, W, C))
+    count = np.zeros((H, W), dtype=np.int32)
+    for r in range(h):
+        for q in range(wd):
+            if w[r, q]:
+                count[r // 2, q // 2] += 1
+                for k in range(C):
+                    out[r // 2, q // 2, k] += img[r, q, k]
+    for r in range(H):
+        for q in range(W):
+            if count[r, q] > 0:
+                for k in range(C):
+                    out[r, q, k] /= count[r, q]
+    return out, count > 0
+
+
+@njit(cache=True, nogil=True)
+def _push(img, w, coarse):  # pragma: no cover - compiled
+    """Every texel of `img` outside `w` takes the value of its block in `coarse` (in place)."""
+    h, wd, C = img.shape
+    for r in range(h):
+        for q in range(wd):
+            if not w[r, q]:
+                for k in range(C):
+                    img[r, q, k] = coarse[r // 2, q // 2, k]
+
+
+def _pull_push_in_place(img: np.ndarray, covered: np.ndarray) -> None:
+    levels = [(img, covered)]
+    while levels[-1][1].shape != (1, 1):  # log2(R) levels
+        levels.append(_pull(*levels[-1]))
+    for (fine, w), (coarse, _) in zip(levels[-2::-1], levels[:0:-1], strict=True):
+        _push(fine, w, coarse)
+
+
 def pull_push(image: np.ndarray, covered: np.ndarray) -> np.ndarray:
     """Fill the texels outside ``covered`` from the covered ones (pull-push).
 
@@ -110,7 +152,8 @@ def pull_push(image: np.ndarray, covered: np.ndarray) -> np.ndarray:
     value of its block one level up. A texel next to a chart thus takes the mean of the chart
     texels in its 2x2 block when there are any, else of the 4x4 block, and so on: every texel of
     the result is filled, with colours of the nearest charts only (never a background colour),
-    as long as one texel is covered.
+    as long as one texel is covered. Compiled loops (numba), so the memory is the image and
+    its pyramid (4/3 of it), about 11 bytes per texel and channel.
 
     Parameters
     ----------
@@ -122,28 +165,9 @@ def pull_push(image: np.ndarray, covered: np.ndarray) -> np.ndarray:
     (h, w, C) float64 ndarray
         ``image`` where covered, filled elsewhere (zeros if nothing is covered).
     """
-    img = np.asarray(image, dtype=np.float64)
-    w = np.asarray(covered, dtype=np.float64)
-    levels = []
-    while True:
-        levels.append((img, w))
-        h, wd = w.shape
-        if h == 1 and wd == 1:
-            break
-        # pad to even sizes with empty texels, then sum the 2x2 blocks
-        ph, pw = h % 2, wd % 2
-        wi = np.pad(img * w[..., None], ((0, ph), (0, pw), (0, 0)))
-        ww = np.pad(w, ((0, ph), (0, pw)))
-        s = wi.reshape(wi.shape[0] // 2, 2, wi.shape[1] // 2, 2, -1).sum(axis=(1, 3))
-        n = ww.reshape(ww.shape[0] // 2, 2, ww.shape[1] // 2, 2).sum(axis=(1, 3))
-        img = np.divide(s, n[..., None], out=np.zeros_like(s), where=n[..., None] > 0)
-        w = (n > 0).astype(np.float64)
-    filled = levels[-1][0]
-    for img, w in reversed(levels[:-1]):
-        h, wd = w.shape
-        up = filled.repeat(2, axis=0).repeat(2, axis=1)[:h, :wd]
-        filled = np.where(w[..., None] > 0, img, up)
-    return filled
+    img = np.array(image, dtype=np.float64, order="C")
+    _pull_push_in_place(img, np.ascontiguousarray(covered, dtype=np.bool_))
+    return img
 
 
 def bake(
@@ -203,7 +227,8 @@ def bake(
     covered = np.zeros((R, R), dtype=np.bool_)
     corners = np.arange(3 * len(F), dtype=np.int64).reshape(-1, 3)
     _bake_kernel(P, corners, corner_values, out, covered)
-    image = pull_push(out, covered)[::-1]  # rows were along v: flip to picture order
+    _pull_push_in_place(out, covered)
+    image = out[::-1]  # rows were along v: flip to picture order (a view)
     covered = covered[::-1]
     return (image[..., 0] if scalar else image), covered
 
@@ -331,13 +356,26 @@ def colorize(
         lo, hi = -max(-lo, hi), max(-lo, hi)
     if cmap not in COLORMAPS:
         raise BakeError(f"unknown colour map {cmap!r}; known: {', '.join(COLORMAPS)}")
-    stops = COLORMAPS[cmap]
     span = hi - lo if hi > lo else 1.0
-    t = np.clip(np.nan_to_num((x - lo) / span, nan=0.0), 0.0, 1.0) * (len(stops) - 1)
+    t = (x - lo) * (COLOR_STEPS / span)
+    np.clip(np.nan_to_num(t, copy=False, nan=0.0), 0, COLOR_STEPS, out=t)
+    t += 0.5
+    return _lut(cmap)[t.astype(np.intp)], {"colormap": cmap, "range": [lo, hi]}
+
+
+# Colour scales are looked up in a table of COLOR_STEPS + 1 entries (even: 0 of a symmetric
+# range is an exact entry): neighbouring entries differ by under one 8-bit level, and a lookup
+# costs a few bytes per texel where interpolating the stops took ~100.
+COLOR_STEPS = 1024
+
+
+@functools.cache
+def _lut(cmap: str) -> np.ndarray:
+    stops = COLORMAPS[cmap].astype(np.float64)
+    t = np.linspace(0.0, len(stops) - 1, COLOR_STEPS + 1)
     k = np.minimum(t.astype(np.int64), len(stops) - 2)
-    f = (t - k)[..., None]
-    rgb = stops[k] * (1 - f) + stops[k + 1] * f
-    return np.round(rgb).astype(np.uint8), {"colormap": cmap, "range": [lo, hi]}
+    f = (t - k)[:, None]
+    return np.round(stops[k] * (1 - f) + stops[k + 1] * f).astype(np.uint8)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -604,7 +642,10 @@ def bake_named(atlas, name: str, *, input_path=None, resolution: int | None = No
         values = scalar
     else:
         image, _ = bake(atlas.V, atlas.F, atlas.uv, atlas.uv_F, values, R)
-        rgb = np.round(np.clip(image, 0, 1) * 255).astype(np.uint8)
+        np.clip(image, 0, 1, out=image)  # in place: the image is ours
+        image *= 255
+        image += 0.5
+        rgb = image.astype(np.uint8)
     return Baked(bake_label(name), rgb, values, scalar, scale, source)
 
 
