@@ -7,9 +7,10 @@ default), simple shading and the seams, and puts the views side by side in one p
 How: every view is a pinhole camera looking at the mesh's bounding sphere. A compiled kernel
 (numba, cached on disk like :mod:`segparam.raster`) rasterizes the triangles with a z-buffer
 kept in ``1/w`` (the reciprocal camera depth, which is linear in screen space) and stores, per
-pixel, the nearest face and its perspective-correct barycentric coordinates (screen
-barycentrics weighted by ``1/w``, renormalised). Texture lookup and shading are then one numpy
-pass over the pixels; seams are drawn as depth-tested lines by a second kernel.
+pixel, the nearest face and its uv interpolated with perspective-correct barycentric
+coordinates (screen barycentrics weighted by ``1/w``, renormalised); a second pass looks the
+texture up and shades each pixel by its face's light, and a third draws the seams as
+depth-tested lines. The three run inside one compiled entry point (one cache load per process).
 """
 
 from __future__ import annotations
@@ -29,8 +30,9 @@ __all__ = [
 ]
 
 # (azimuth, elevation) in degrees around the vertical axis (+y, OBJ's and glTF's up): the four
-# sides seen a little from above. Four views of 256 px: 20k faces in 0.07-0.11 s once the
-# kernels are loaded (BENCHMARKS.md section 8), within the preview's 0.15 s budget.
+# sides seen a little from above. Four views of 256 px: 20k faces in 0.04-0.12 s (machine
+# load 4-6), 0.08-0.13 s in a `segparam atlas` run with the kernel's loading (BENCHMARKS.md
+# section 8): within the preview's 0.15 s budget.
 DEFAULT_VIEWS: tuple[tuple[float, float], ...] = ((30, 20), (120, 20), (210, 20), (300, 20))
 DEFAULT_SIZE = 256
 # Camera distance in bounding-sphere radii; the field of view is set so the sphere fills the
@@ -135,6 +137,23 @@ def _raster_kernel(S, F, T, invw_buf, face_buf, uv_buf):  # pragma: no cover - c
 
 
 @njit(cache=True, nogil=True)
+def _shade_kernel(face_buf, uv_buf, texture, light, out):  # pragma: no cover - compiled
+    """Colour of every drawn pixel: the nearest texel at its uv (picture order: row 0 is v = 1)
+    times its face's light; other pixels are left as they are."""
+    H, W = face_buf.shape
+    th, tw = texture.shape[0], texture.shape[1]
+    for r in range(H):
+        for q in range(W):
+            f = face_buf[r, q]
+            if f < 0:
+                continue
+            col = min(max(int(uv_buf[r, q, 0] * tw), 0), tw - 1)
+            row = min(max(int((1.0 - uv_buf[r, q, 1]) * th), 0), th - 1)
+            for k in range(3):
+                out[r, q, k] = min(texture[row, col, k] * light[f] + 0.5, 255.0)
+
+
+@njit(cache=True, nogil=True)
 def _seam_kernel(S, E, invw_buf, tol, seam_buf):  # pragma: no cover - compiled
     """Mark the pixels of segments E (screen positions S) that are not behind the surface."""
     H, W = invw_buf.shape
@@ -153,6 +172,19 @@ def _seam_kernel(S, E, invw_buf, tol, seam_buf):  # pragma: no cover - compiled
             iw = S[a, 2] + f * (S[b, 2] - S[a, 2])
             if iw >= invw_buf[r, q] * (1.0 - tol):
                 seam_buf[r, q] = True
+
+
+@njit(cache=True, nogil=True)
+def _render_kernel(S, F, T, light, texture, E, tol, out, seam_mark):  # pragma: no cover
+    """One view: rasterize, shade, mark the seams. One compiled entry point, so that a new
+    process loads one cached function for the preview instead of three (~0.03 s each)."""
+    H, W = seam_mark.shape
+    invw = np.zeros((H, W))
+    face = np.full((H, W), -1, dtype=np.int64)
+    uvs = np.zeros((H, W, 2))
+    _raster_kernel(S, F, T, invw, face, uvs)
+    _shade_kernel(face, uvs, texture, light, out)
+    _seam_kernel(S, E, invw, tol, seam_mark)
 
 
 def seam_edges(F: np.ndarray, face_uv: np.ndarray) -> np.ndarray:
@@ -188,31 +220,20 @@ def render_view(
     F = np.ascontiguousarray(F, dtype=np.int64)
     S = np.ascontiguousarray(camera.project(V))
     T = np.ascontiguousarray(np.asarray(uv, dtype=np.float64)[np.asarray(face_uv, dtype=np.int64)])
-    invw = np.zeros((size, size))
-    face = np.full((size, size), -1, dtype=np.int64)
-    uvs = np.zeros((size, size, 2))
-    _raster_kernel(S, F, T, invw, face, uvs)
-    out = np.empty((size, size, 3), dtype=np.uint8)
-    out[:] = BACKGROUND
-    hit = face >= 0
-    U = uvs[hit]
-    th, tw = texture.shape[:2]
-    col = np.clip((U[:, 0] * tw).astype(np.int64), 0, tw - 1)
-    row = np.clip(((1.0 - U[:, 1]) * th).astype(np.int64), 0, th - 1)  # picture order
     if shade:
         from .mesh import face_normals
 
         N = face_normals(np.asarray(V, dtype=np.float64), F) if normals is None else normals
         light = AMBIENT + (1 - AMBIENT) * np.abs(N @ camera.forward)  # per face
-        rgb = texture[row, col, :3] * light[face[hit]][:, None]
-        out[hit] = np.minimum(rgb + 0.5, 255).astype(np.uint8)
     else:
-        out[hit] = texture[row, col, :3]
-    if seams is not None and len(seams):
-        mark = np.zeros((size, size), dtype=np.bool_)
-        E = np.ascontiguousarray(seams, dtype=np.int64)
-        _seam_kernel(S, E, invw, SEAM_DEPTH_TOLERANCE, mark)
-        out[mark] = SEAM_COLOR
+        light = np.ones(len(F))
+    tex = np.ascontiguousarray(texture[..., :3], dtype=np.uint8)
+    E = np.zeros((0, 2), np.int64) if seams is None else np.ascontiguousarray(seams, np.int64)
+    out = np.empty((size, size, 3), dtype=np.uint8)
+    out[:] = BACKGROUND
+    mark = np.zeros((size, size), dtype=np.bool_)
+    _render_kernel(S, F, T, light, tex, E.reshape(-1, 2), SEAM_DEPTH_TOLERANCE, out, mark)
+    out[mark] = SEAM_COLOR
     return out
 
 
