@@ -5,11 +5,12 @@ this file only, and ``segparam.build_atlas`` imports :mod:`segparam.pipeline` (n
 numba ...) the first time it is used. Type checkers see the names through the
 ``TYPE_CHECKING`` block below.
 
-Four functions share their name with their module: ``segparam.clean``, ``segparam.remesh``,
-``segparam.segment`` and ``segparam.repack`` are the modules (call ``segparam.clean.clean(V, F)``,
-``segparam.repack.repack(...)``). A package attribute named like a submodule is replaced by the
-module as soon as anything imports the submodule, so exporting the functions under those names
-would make ``segparam.clean`` a function or a module depending on import order.
+Five functions share their name with their module: ``segparam.bake``, ``segparam.clean``,
+``segparam.remesh``, ``segparam.segment`` and ``segparam.repack`` are the modules (call
+``segparam.clean.clean(V, F)``, ``segparam.bake.bake(...)``). A package attribute named like a
+submodule is replaced by the module as soon as anything imports the submodule, so exporting the
+functions under those names would make ``segparam.clean`` a function or a module depending on
+import order.
 """
 
 __version__ = "0.1.0"
@@ -44,6 +45,11 @@ _EXPORTS = {
     "pack_charts": "pack",
     "PackConfig": "pack",
     "PackResult": "pack",
+    # pictures and data on the atlas
+    "render_preview": "render",
+    "write_viewer": "viewer",
+    "write_flat_gifti": "flatmap",
+    "render_flatmap": "flatmap",
     # existing uv islands
     "uv_islands": "repack",
     "RepackConfig": "repack",
@@ -57,7 +63,7 @@ _EXPORTS = {
 }
 
 # The modules whose main function has the module's name (see the module docstring).
-_SAME_NAME_MODULES = ("clean", "remesh", "repack", "segment")
+_SAME_NAME_MODULES = ("bake", "clean", "remesh", "repack", "segment")
 
 # Written out so that tools read it (tests/test_face.py checks it against the two above).
 __all__ = [
@@ -82,6 +88,7 @@ __all__ = [
     "SolverError",
     "SplitConfig",
     "__version__",
+    "bake",
     "build_atlas",
     "clean",
     "config_from_dict",
@@ -93,11 +100,15 @@ __all__ = [
     "parameterize_charts",
     "parametrize",
     "remesh",
+    "render_flatmap",
+    "render_preview",
     "repack",
     "save_atlas",
     "segment",
     "unwrap",
     "uv_islands",
+    "write_flat_gifti",
+    "write_viewer",
 ]
 
 
@@ -120,10 +131,11 @@ def __dir__() -> list[str]:
 
 TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing (type checkers know it)
 if TYPE_CHECKING:  # pragma: no cover
-    from . import clean, remesh, repack, segment
+    from . import bake, clean, remesh, repack, segment
     from .clean import CleanResult
     from .errors import ConfigError, InvalidMeshError, MeshFileError, SegparamError, SolverError
     from .export import save_atlas
+    from .flatmap import render_flatmap, write_flat_gifti
     from .interop import parametrize, unwrap
     from .io import load_mesh
     from .pack import PackConfig, PackResult, pack_charts
@@ -137,6 +149,8 @@ if TYPE_CHECKING:  # pragma: no cover
         pack_atlas,
     )
     from .remesh import RemeshConfig, RemeshResult
+    from .render import render_preview
     from .repack import RepackConfig, RepackResult, uv_islands
     from .segment import Segmentation, SegmentConfig
     from .split import ChartSet, SplitConfig, parameterize_charts
+    from .viewer import write_viewer

@@ -294,6 +294,7 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
         mesh_stem,
         name_max,
     )
+    from .pictures import check_bakes
     from .pipeline import build_atlas
 
     source = Path(args.input) if args.input else _data(DEFAULT_MESH_NAME)
@@ -303,11 +304,13 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
     else:
         outdir = Path(fit_name(stem, "_atlas", limit=name_max(Path.cwd())))
     config = _config_from_args(args)
+    pictures = _picture_options(args, source)
     # Everything about the output location, before any work: a run never fails at its end for it.
     stem = atlas_stem(stem, outdir)
-    check_output_folder(outdir, atlas_file_names(stem).values(), inputs=[source])
+    check_output_folder(outdir, atlas_file_names(stem, pictures).values(), inputs=[source])
     t0 = time.perf_counter()
     V, F = load_mesh(source)
+    check_bakes(pictures.bakes, source, V)  # data files of the right length, before the work
     bar = _progress_bar(args.quiet)
     try:
         with _naming(source):
@@ -315,7 +318,7 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
     finally:
         if bar:
             bar.close()
-    written = atlas.save(outdir, stem=stem)
+    written = atlas.save(outdir, stem=stem, pictures=pictures)
     if not args.quiet:
         r = atlas.report()
         a = r["atlas"]
@@ -377,6 +380,36 @@ class _StageBar:
 
 def _progress_bar(quiet: bool) -> _StageBar | None:
     return None if quiet or not sys.stderr.isatty() else _StageBar()
+
+
+def _picture_options(args: argparse.Namespace, source: Path):
+    """The pictures ``segparam atlas`` writes (:class:`segparam.pictures.PictureOptions`)."""
+    from .pictures import PictureOptions, flat_default
+
+    return PictureOptions(
+        preview=not args.no_preview,
+        viewer=not args.no_viewer,
+        bakes=tuple(args.bake or ()),
+        flat=bool(args.flat or flat_default(source)),
+        input_path=str(source),
+    )
+
+
+def add_picture_options(p: argparse.ArgumentParser) -> None:
+    """The options of the atlas folder's pictures (``atlas``)."""
+    p.add_argument("--no-preview", action="store_true", help="no <stem>_preview.png")
+    p.add_argument("--no-viewer", action="store_true", help="no <stem>.html")
+    p.add_argument(
+        "--bake",
+        action="append",
+        metavar="NAME",
+        help="write <stem>_<NAME>.png: curvature, gaussian-curvature, normals, vertex-colors, "
+        "or a per-vertex data file (.func.gii/.shape.gii, lh.thickness, .npy, .csv, .txt); "
+        "repeatable",
+    )
+    p.add_argument(
+        "--flat", action="store_true", help="<stem>_flat.gii and _flatmap.png (on for GIfTI input)"
+    )
 
 
 def add_pipeline_options(p: argparse.ArgumentParser) -> None:
@@ -516,6 +549,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     atlas.add_argument("-o", "--output", help="output folder (default: ./<input stem>_atlas)")
     add_pipeline_options(atlas)
+    add_picture_options(atlas)
     atlas.set_defaults(func=_cmd_atlas)
 
     _add_batch_parser(sub)

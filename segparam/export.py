@@ -264,9 +264,12 @@ def _png_bytes(pixels: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def save_atlas(atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: int | None = None):
+def save_atlas(
+    atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: int | None = None, pictures=None
+):
     """Write an atlas into ``outdir``: ``<stem>.obj/.mtl/_checker.png``, ``<stem>.glb``,
-    ``<stem>_uv.png`` and ``report.json``.
+    ``<stem>_uv.png``, the pictures of ``pictures`` (:class:`segparam.pictures.PictureOptions`;
+    default ``<stem>_preview.png`` and ``<stem>.html``) and ``report.json``.
 
     The folder is checked first (:func:`check_output_folder`); a stem too long for the file
     system is shortened (:func:`atlas_stem`). Every file is then written into a staging folder
@@ -292,10 +295,24 @@ def save_atlas(atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: in
     if not stem or stem in (".", "..") or "/" in stem or os.sep in stem:
         raise MeshFileError(f"stem {stem!r} is not a file name")
     stem = atlas_stem(stem, outdir)
-    names = atlas_file_names(stem)
+    from .pictures import PictureOptions, make_pictures
+
+    pictures = PictureOptions() if pictures is None else pictures
+    names = atlas_file_names(stem, pictures)
     check_output_folder(outdir, names.values())
     size = size or atlas.packing.resolution
     try:
+        # the pictures are made before anything is written: a failure leaves no file
+        layout = render_uv_layout(atlas.uv, atlas.uv_F, labels=atlas.chart_of_face, size=size)
+        uv_png = _png_bytes(np.asarray(layout))
+        extra, pictures_info = make_pictures(
+            atlas, stem, pictures, checker_png=_checker_png(1024), uv_png=uv_png
+        )
+        report = atlas.report()
+        seconds = pictures_info.pop("seconds")
+        timings = {**report.get("timings", {}), **{f"picture {k}": v for k, v in seconds.items()}}
+        report["timings"] = timings
+        report["pictures"] = pictures_info
         with staged_outputs(outdir) as stage:
             checker = _checker_png(1024)
             (stage / names["checker"]).write_bytes(checker)
@@ -315,10 +332,11 @@ def save_atlas(atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: in
             (stage / names["glb"]).write_bytes(
                 _glb_bytes(atlas.V[atlas.uv_vertex], atlas.uv_F, atlas.uv, checker)
             )
-            layout = render_uv_layout(atlas.uv, atlas.uv_F, labels=atlas.chart_of_face, size=size)
-            layout.save(stage / names["uv"], format="PNG")
+            (stage / names["uv"]).write_bytes(uv_png)
+            for name, data in extra.items():
+                (stage / name).write_bytes(data)
             (stage / names["report"]).write_text(
-                json.dumps(atlas.report(), indent=1, sort_keys=False) + "\n", encoding="utf-8"
+                json.dumps(report, indent=1, sort_keys=False) + "\n", encoding="utf-8"
             )
     except MeshFileError:
         raise

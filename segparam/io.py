@@ -966,7 +966,7 @@ def json_safe(value: Any) -> Any:
 # Where the outputs go: checked before any work, so that a run never fails at the end for it
 
 #: What segparam appends to the stem of every file of an atlas folder (and ``report.json``).
-ATLAS_SUFFIXES = (".obj", ".mtl", "_checker.png", ".glb", "_uv.png")
+ATLAS_SUFFIXES = (".obj", ".mtl", "_checker.png", ".glb", "_uv.png", "_preview.png", ".html")
 #: File-name limit (bytes) assumed where the file system does not say (ext4, APFS, NTFS: 255).
 DEFAULT_NAME_MAX = 255
 
@@ -1036,14 +1036,19 @@ def atlas_stem(stem: str, outdir: str | os.PathLike) -> str:
     return fit_name(stem, limit=name_max(outdir) - longest)
 
 
-def atlas_file_names(stem: str) -> dict[str, str]:
-    """The files :func:`segparam.export.save_atlas` writes into its folder, by role."""
+def atlas_file_names(stem: str, pictures=None) -> dict[str, str]:
+    """The files :func:`segparam.export.save_atlas` writes into its folder, by role;
+    ``pictures`` (a :class:`segparam.pictures.PictureOptions`, default: preview and viewer) adds
+    its files."""
+    from .pictures import PictureOptions
+
     return {
         "obj": f"{stem}.obj",
         "mtl": f"{stem}.mtl",
         "checker": f"{stem}_checker.png",
         "glb": f"{stem}.glb",
         "uv": f"{stem}_uv.png",
+        **(PictureOptions() if pictures is None else pictures).file_names(stem),
         "report": "report.json",
     }
 

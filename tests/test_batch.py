@@ -23,6 +23,7 @@ from segparam.pipeline import PipelineConfig
 
 FAST = ["--resolution", "256", "--quiet"]
 ATLAS_FILES = ["{s}.glb", "{s}.mtl", "{s}.obj", "{s}_checker.png", "{s}_uv.png", "report.json"]
+ATLAS_FILES += ["{s}_preview.png", "{s}.html"]
 
 
 def run_cli(argv):

@@ -41,6 +41,8 @@ def test_atlas_command_writes_every_output(grid_obj, tmp_path, capsys):
         f"{stem}.obj",
         f"{stem}_checker.png",
         f"{stem}_uv.png",
+        f"{stem}_preview.png",
+        f"{stem}.html",
     ]
     assert names == sorted(expected + ["report.json"])
     report = json.loads((out / "report.json").read_text())

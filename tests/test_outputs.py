@@ -316,7 +316,7 @@ def test_a_250_character_input_name_gets_shortened_output_names(stem, tmp_path, 
     code, lines = run(["atlas", source, "-o", out, *FAST], capsys)
     assert code == 0 and lines == []
     names = files_in(out)
-    assert len(names) == 6 and "report.json" in names
+    assert len(names) == 8 and "report.json" in names
     (obj,) = [name for name in names if name.endswith(".obj")]
     short = obj[: -len(".obj")]
     assert short[-9] == "~" and int(short[-8:], 16) >= 0
@@ -338,7 +338,7 @@ def test_a_long_input_name_with_the_default_output_folders(tmp_path, capsys, mon
     assert code == 0 and lines == []
     (folder,) = [p for p in tmp_path.iterdir() if p.name.endswith("_atlas")]
     assert len(folder.name.encode()) <= 255 and folder.name.startswith("y" * 200)
-    assert len(files_in(folder)) == 6
+    assert len(files_in(folder)) == 8
     code, lines = run(["chart", source, "--quiet"], capsys)  # default <stem>_uv.obj
     assert code == 0 and lines == []
     made = sorted(p.name for p in tmp_path.iterdir() if p.is_file())
@@ -406,7 +406,7 @@ def test_atlas_save_into_a_read_only_folder(small_atlas, read_only_folder):
 
 def test_atlas_save_shortens_a_long_stem(small_atlas, tmp_path):
     written = small_atlas.save(tmp_path, stem="s" * 300)
-    assert len(written) == 6 and all(p.exists() for p in written)
+    assert len(written) == 8 and all(p.exists() for p in written)
     assert all(len(p.name.encode()) <= 255 for p in written)
 
 
