@@ -307,6 +307,8 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
     stem = atlas_stem(stem, outdir)
     check_output_folder(outdir, atlas_file_names(stem).values(), inputs=[source])
     t0 = time.perf_counter()
+    if args.uvs:
+        return _repack_file(source, outdir, stem, config, args)
     V, F = load_mesh(source)
     bar = _progress_bar(args.quiet)
     try:
@@ -341,6 +343,36 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
         )
         times = "  ".join(f"{k} {v:.1f}s" for k, v in atlas.timings.items())
         print(f"  time {time.perf_counter() - t0:.1f}s: {times}")
+        print(f"  wrote {len(written)} files to {outdir}/")
+    return 0
+
+
+def _repack_file(source: Path, outdir: Path, stem: str, config, args: argparse.Namespace) -> int:
+    """``segparam atlas INPUT --uvs keep|repair``: the input's own uv islands as the charts."""
+    from .errors import MeshFileError
+    from .io import load_mesh
+    from .repack import RepackConfig, repack
+
+    mesh = load_mesh(source, uvs=True)
+    if mesh.uv is None:
+        raise MeshFileError(
+            f"{source}: has no uv on every face (OBJ vt with f v/vt corners, glTF TEXCOORD_0); "
+            f"--uvs {args.uvs} needs them"
+        )
+    cfg = RepackConfig(mode=args.uvs, pack=config.pack, split=config.split, seed=args.seed)
+    with _naming(source):
+        result = repack(mesh.V, mesh.F, mesh.uv, mesh.uv_F, config=cfg)
+    written = result.save(outdir, stem=stem)
+    if not args.quiet:
+        r = result.report()
+        print(
+            f"{source.name}: {len(r['islands'])} uv islands, {r['kept_islands']} kept, "
+            f"{r['recharted_islands']} re-charted; {r['charts']} charts, "
+            f"utilization {r['utilization']:.3f}"
+        )
+        for island in r["islands"]:
+            if not island["kept"]:
+                print(f"  island {island['island']} re-charted: {', '.join(island['reasons'])}")
         print(f"  wrote {len(written)} files to {outdir}/")
     return 0
 
@@ -515,6 +547,12 @@ def build_parser() -> argparse.ArgumentParser:
         "input", nargs="?", help=f"mesh file (default: the sample {DEFAULT_MESH_NAME})"
     )
     atlas.add_argument("-o", "--output", help="output folder (default: ./<input stem>_atlas)")
+    atlas.add_argument(
+        "--uvs",
+        choices=["keep", "repair"],
+        help="repack the input's own uv islands (OBJ vt, glTF TEXCOORD_0) instead of charting: "
+        "keep them all, or repair (re-chart the islands that overlap, flip or leave the square)",
+    )
     add_pipeline_options(atlas)
     atlas.set_defaults(func=_cmd_atlas)
 
