@@ -49,18 +49,21 @@ def _integer(low: int, high: int):
     return parse
 
 
-def _number(low: float):
-    """An argparse ``type``: a finite number ``>= low``."""
+def _number(low: float, *, above: bool = False):
+    """An argparse ``type``: a finite number ``>= low`` (``> low`` with ``above``)."""
+    relation = ">" if above else ">="
 
     def parse(text: str) -> float:
         try:
             value = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(
-                f"expected a number >= {low:g}, got {text!r}"
+                f"expected a number {relation} {low:g}, got {text!r}"
             ) from None
-        if not (math.isfinite(value) and value >= low):
-            raise argparse.ArgumentTypeError(f"must be a finite number >= {low:g}, got {text}")
+        if not (math.isfinite(value) and (value > low if above else value >= low)):
+            raise argparse.ArgumentTypeError(
+                f"must be a finite number {relation} {low:g}, got {text}"
+            )
         return value
 
     parse.__name__ = "number"
@@ -80,6 +83,10 @@ PADDING = _integer(0, _MAX_RESOLUTION // 2)
 MAX_CHARTS = _integer(1, 1_000_000)
 #: ``--max-distortion``: an angle distortion s1/s2, 1 at best.
 MAX_DISTORTION = _number(1.0)
+#: ``--texels-per-unit``: texels per unit of 3-D length.
+TEXELS_PER_UNIT = _number(0.0, above=True)
+#: ``--max-chart-size``: texels, 0 for no limit.
+MAX_CHART_SIZE = _integer(0, _MAX_RESOLUTION)
 
 
 @contextlib.contextmanager
@@ -189,6 +196,12 @@ def _config_from_args(args: argparse.Namespace):
         overrides["pack"]["resolution"] = args.resolution
     if getattr(args, "padding", None) is not None:
         overrides["pack"]["padding"] = args.padding
+    if getattr(args, "texels_per_unit", None) is not None:
+        overrides["pack"]["texels_per_unit"] = args.texels_per_unit
+        if getattr(args, "resolution", None) is None:  # the resolution follows the density
+            overrides["pack"]["resolution"] = 0
+    if getattr(args, "max_chart_size", None) is not None:
+        overrides["pack"]["max_chart_size"] = args.max_chart_size
     if getattr(args, "no_remesh", False):
         overrides["remesh"]["mode"] = "off"
     elif getattr(args, "remesh", None) is not None:
@@ -418,6 +431,19 @@ def add_pipeline_options(p: argparse.ArgumentParser) -> None:
         "--resolution", type=RESOLUTION, help="texture size in texels, 1 to 16384 (default 1024)"
     )
     p.add_argument("--padding", type=PADDING, help="texels between charts and at the border (2)")
+    p.add_argument(
+        "--texels-per-unit",
+        type=TEXELS_PER_UNIT,
+        metavar="X",
+        help="texel density: texels per unit of 3-D length; the resolution follows, or is "
+        "checked against --resolution (default: the largest density that fits)",
+    )
+    p.add_argument(
+        "--max-chart-size",
+        type=MAX_CHART_SIZE,
+        metavar="N",
+        help="most texels a chart may span; larger charts are scaled down (0: no limit)",
+    )
     p.add_argument("--remesh", choices=["auto", "on", "off"], help="remeshing policy (auto)")
     p.add_argument("--no-remesh", action="store_true", help="keep the input's vertices")
     p.add_argument("--max-charts", type=MAX_CHARTS, help="most charts from the segmentation")

@@ -84,14 +84,33 @@ def chart_room(resolution: int, padding: int) -> int:
 
 
 def _check_room(n_charts: int, pack: PackConfig, what: str) -> None:
-    """A :class:`ConfigError` when ``n_charts`` charts cannot fit the texture at all."""
-    room = chart_room(pack.resolution, pack.padding)
+    """A :class:`ConfigError` when ``n_charts`` charts cannot fit the texture at all (the
+    largest texture when the resolution follows from the texel density)."""
+    G, p = pack.resolution or MAX_RESOLUTION, pack.padding
+    room = chart_room(G, p)
     if n_charts > room:
-        G, p = pack.resolution, pack.padding
         raise ConfigError(
             f"{what} {n_charts} charts, but a {G}x{G} texture with padding {p} has room for at "
             f"most {room} (one texel each, {p} texels apart); raise the resolution or lower "
             "the padding"
+        )
+
+
+def _check_density(area: float, pack: PackConfig, what: str = "the mesh") -> None:
+    """A :class:`ConfigError` when charts of 3-D ``area`` cannot fit the texture at
+    ``pack.texels_per_unit`` whatever their shapes (they need ``area * texels_per_unit**2``
+    texels inside the padded border): known before any stage runs. Charts above
+    ``pack.max_chart_size`` shrink, so then nothing is known before packing."""
+    X = pack.texels_per_unit
+    if X <= 0 or pack.max_chart_size > 0:
+        return
+    G, p = pack.resolution or MAX_RESOLUTION, pack.padding
+    side = float(np.sqrt(area)) * X
+    if side > G - 2 * p:
+        raise ConfigError(
+            f"at {X:g} texels per unit {what} ({area:.6g} square units) needs at least "
+            f"{side:.0f}x{side:.0f} texels, more than a {G}x{G} texture with padding {p} holds; "
+            "lower the texel density or raise the resolution"
         )
 
 
@@ -344,6 +363,7 @@ def build_report(atlas: Atlas) -> dict[str, Any]:
             "utilization": atlas.packing.utilization,
             "resolution": atlas.packing.resolution,
             "padding": atlas.packing.padding,
+            "texels_per_unit": atlas.packing.scale * atlas.packing.resolution,
             "seam_length_over_sqrt_area": atlas.seam_length() / np.sqrt(total_area),
             **distortion(V[atlas.uv_vertex], atlas.uv_F, atlas.uv),
         },
@@ -406,6 +426,7 @@ def build_atlas(
         # Charts are connected: at least one per connected piece (counted only when it can matter).
         pieces = connected_components(cleaned.F)[0]
         _check_room(pieces, cfg.pack, f"the mesh has {pieces} connected pieces, so at least")
+    _check_density(float(face_areas(cleaned.V, cleaned.F).sum()), cfg.pack)
 
     with _timed(timings, "remesh"):
         remeshed = remesh(cleaned.V, cleaned.F, config=cfg.remesh)
