@@ -21,6 +21,8 @@ _EXPORTS = {
     "unwrap": "interop",
     # whole pipeline
     "build_atlas": "pipeline",
+    "build_atlases": "pipeline",
+    "MultiAtlas": "pipeline",
     "pack_atlas": "pipeline",
     "Atlas": "pipeline",
     "PipelineConfig": "pipeline",
@@ -28,7 +30,7 @@ _EXPORTS = {
     "config_from_dict": "pipeline",
     # files
     "load_mesh": "io",
-    "save_atlas": "io",
+    "save_atlas": "export",
     # stages, their configs and results
     "CleanResult": "clean",
     "RemeshConfig": "remesh",
@@ -69,6 +71,7 @@ __all__ = [
     "HessianSolver",
     "InvalidMeshError",
     "MeshFileError",
+    "MultiAtlas",
     "PackConfig",
     "PackResult",
     "PipelineConfig",
@@ -83,6 +86,7 @@ __all__ = [
     "SplitConfig",
     "__version__",
     "build_atlas",
+    "build_atlases",
     "clean",
     "config_from_dict",
     "load_config",
@@ -123,14 +127,17 @@ if TYPE_CHECKING:  # pragma: no cover
     from . import clean, remesh, repack, segment
     from .clean import CleanResult
     from .errors import ConfigError, InvalidMeshError, MeshFileError, SegparamError, SolverError
+    from .export import save_atlas
     from .interop import parametrize, unwrap
-    from .io import load_mesh, save_atlas
+    from .io import load_mesh
     from .pack import PackConfig, PackResult, pack_charts
     from .parameterize import ChartMap, HessianSolver, parameterize_chart
     from .pipeline import (
         Atlas,
+        MultiAtlas,
         PipelineConfig,
         build_atlas,
+        build_atlases,
         config_from_dict,
         load_config,
         pack_atlas,

@@ -191,7 +191,7 @@ def atlas_to_trimesh(atlas: Atlas, image: Any = None) -> trimesh.Trimesh:
     import trimesh
     from trimesh.visual import TextureVisuals
 
-    from .io import checker_image
+    from .export import checker_image
 
     texture = checker_image(CHECKER_SIZE) if image is None else image
     return trimesh.Trimesh(

@@ -235,7 +235,7 @@ def test_unwrap_mirrors_trimesh_unwrap():
     default = trimesh.visual.TextureVisuals(uv=uvs, image=None).material.image  # trimesh's
     assert out.visual.material.image.size == default.size
     np.testing.assert_array_equal(mesh.vertices, before)
-    from segparam.io import checker_image
+    from segparam.export import checker_image
 
     image = checker_image(64)
     assert segparam.unwrap(mesh, image, config=FAST).visual.material.image is image
