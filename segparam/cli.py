@@ -309,7 +309,9 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
     )
     from .pipeline import build_atlas
 
-    source = Path(args.input) if args.input else _data(DEFAULT_MESH_NAME)
+    if len(args.input) > 1:
+        return _atlas_of_several([Path(p) for p in args.input], args)
+    source = Path(args.input[0]) if args.input else _data(DEFAULT_MESH_NAME)
     stem = mesh_stem(source)
     if args.output:
         outdir = Path(args.output)
@@ -356,6 +358,56 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
         )
         times = "  ".join(f"{k} {v:.1f}s" for k, v in atlas.timings.items())
         print(f"  time {time.perf_counter() - t0:.1f}s: {times}")
+        print(f"  wrote {len(written)} files to {outdir}/")
+    return 0
+
+
+def _atlas_of_several(sources: list[Path], args: argparse.Namespace) -> int:
+    """``segparam atlas a.obj b.ply ... -o OUT``: one texture, one texel density, one OBJ and
+    GLB per input, one report (:func:`segparam.pipeline.build_atlases`)."""
+    from .errors import ConfigError
+    from .io import (
+        all_file_names,
+        check_output_folder,
+        load_mesh,
+        mesh_stem,
+        multi_atlas_file_names,
+        unique_names,
+    )
+    from .pipeline import build_atlases
+
+    if args.uvs:
+        raise ConfigError(f"--uvs repacks one input mesh, got {len(sources)}")
+    if not args.output:
+        raise ConfigError(f"{len(sources)} input meshes make one atlas: name its folder with -o")
+    outdir = Path(args.output)
+    config = _config_from_args(args)
+    names = unique_names([mesh_stem(p) for p in sources])
+    files = multi_atlas_file_names("atlas", names, outdir)
+    check_output_folder(outdir, all_file_names(files), inputs=sources)
+    meshes = [load_mesh(p) for p in sources]  # every file read before any work
+    bar = _progress_bar(args.quiet)
+    try:
+        multi = build_atlases(
+            meshes,
+            config,
+            seed=args.seed,
+            names=names,
+            progress=bar.update if bar else None,
+        )
+    finally:
+        if bar:
+            bar.close()
+    written = multi.save(outdir, stem="atlas")
+    if not args.quiet:
+        r = multi.report()["texture"]
+        print(
+            f"{r['meshes']} meshes, {r['charts']} charts in one {r['resolution']}x"
+            f"{r['resolution']} texture at {r['texels_per_unit']:.4g} texels per unit, "
+            f"utilization {r['utilization']:.3f}"
+        )
+        for name, atlas, source in zip(names, multi.atlases, sources, strict=True):
+            print(f"  {name} ({source}): {len(atlas.F)} faces, {atlas.n_charts} charts")
         print(f"  wrote {len(written)} files to {outdir}/")
     return 0
 
@@ -568,11 +620,23 @@ def build_parser() -> argparse.ArgumentParser:
     chart.add_argument("--quiet", action="store_true", help="print nothing on success")
     chart.set_defaults(func=_cmd_chart)
 
-    atlas = sub.add_parser("atlas", help="mesh file -> packed UV atlas (OBJ, GLB, PNGs, report)")
-    atlas.add_argument(
-        "input", nargs="?", help=f"mesh file (default: the sample {DEFAULT_MESH_NAME})"
+    atlas = sub.add_parser(
+        "atlas",
+        help="mesh file(s) -> packed UV atlas (OBJ, GLB, PNGs, report)",
+        description="One mesh: its atlas files. Several meshes: one texture at one texel "
+        "density, an OBJ and a GLB per mesh, one report (use 'segparam batch' for an atlas "
+        "per mesh).",
     )
-    atlas.add_argument("-o", "--output", help="output folder (default: ./<input stem>_atlas)")
+    atlas.add_argument(
+        "input",
+        nargs="*",
+        help=f"mesh file(s) (default: the sample {DEFAULT_MESH_NAME})",
+    )
+    atlas.add_argument(
+        "-o",
+        "--output",
+        help="output folder (default for one input: ./<input stem>_atlas; needed for several)",
+    )
     atlas.add_argument(
         "--uvs",
         choices=["keep", "repair"],

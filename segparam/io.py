@@ -47,10 +47,13 @@ __all__ = [
     "json_safe",
     "load_mesh",
     "MeshUV",
+    "all_file_names",
+    "multi_atlas_file_names",
     "mesh_stem",
     "name_max",
     "split_suffix",
     "staged_outputs",
+    "unique_names",
 ]
 
 SUPPORTED_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf", ".gii", ".gii.gz")
@@ -1163,6 +1166,47 @@ def atlas_file_names(stem: str) -> dict[str, str]:
         "uv": f"{stem}_uv.png",
         "report": "report.json",
     }
+
+
+def unique_names(names: list[str]) -> list[str]:
+    """``names`` with repeats renamed ``<name>_2``, ``<name>_3``... (case-insensitively, as
+    file names on some systems)."""
+    seen: set[str] = set()
+    out = []
+    for name in names:  # loop over meshes
+        candidate, k = name, 1
+        while candidate.lower() in seen:
+            k += 1
+            candidate = f"{name}_{k}"
+        seen.add(candidate.lower())
+        out.append(candidate)
+    return out
+
+
+def multi_atlas_file_names(
+    stem: str, names: Iterable[str], outdir: str | os.PathLike
+) -> dict[str, Any]:
+    """The files :func:`segparam.export.save_atlases` writes into ``outdir``: the shared
+    ``mtl``, ``checker``, ``uv`` and ``report``, and ``meshes``: per mesh name its ``obj`` and
+    ``glb`` (names shortened by :func:`fit_name` to fit the file system)."""
+    shared = atlas_file_names(atlas_stem(stem, outdir))
+    limit = name_max(outdir) - len(".obj")
+    meshes = [fit_name(name, limit=limit) for name in names]
+    if len({m.lower() for m in meshes}) != len(meshes):
+        raise MeshFileError(f"{outdir}: two meshes would write files of the same name")
+    return {
+        "mtl": shared["mtl"],
+        "checker": shared["checker"],
+        "uv": shared["uv"],
+        "report": shared["report"],
+        "meshes": [{"obj": f"{m}.obj", "glb": f"{m}.glb"} for m in meshes],
+    }
+
+
+def all_file_names(names: dict[str, Any]) -> list[str]:
+    """Every file name of :func:`multi_atlas_file_names`."""
+    files = [v for k, v in names.items() if k != "meshes"]
+    return files + [f for mesh in names["meshes"] for f in mesh.values()]
 
 
 def error_reason(exc: BaseException) -> str:
