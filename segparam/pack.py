@@ -754,6 +754,41 @@ _FIRST_UTILIZATION = 0.8
 _GROW = 1.05
 
 
+#: ``max_chart_size`` at the density the search found: if the limited charts do not fit at it
+#: (the placement rules are greedy, not monotone), it is lowered by this factor, a few times.
+_DERIVED_SHRINK = 0.98
+_DERIVED_TRIES = 8
+
+
+def _limited(
+    uvs: Sequence[np.ndarray],
+    faces: Sequence[np.ndarray],
+    areas3d: np.ndarray,
+    s: float,
+    max_chart_size: int,
+) -> list[_Chart] | None:
+    """The charts with those spanning more than ``max_chart_size`` texels at ``s`` texels per
+    unit scaled down to that (their area weight times the factor squared), or None when no
+    chart is above the limit (or there is none)."""
+    if max_chart_size <= 0:
+        return None
+    charts = _prepare(uvs, faces, areas3d)
+    longest = np.array([float(ch.extent.max()) for ch in charts])
+    shrink = np.minimum(1.0, max_chart_size / (longest * s))
+    if not (shrink < 1).any():
+        return None
+    return _prepare(uvs, faces, areas3d * shrink**2)
+
+
+def _one_trial(charts: list[_Chart], s: float, G: int, p: int, cfg: PackConfig) -> list | None:
+    """The placement rules once at scale ``s`` on a ``G`` texture: the layout, or None."""
+    trial, rules, order, turns, oriented = _trial_setup(charts, cfg)
+    if max(float(ch.extent.max()) for ch in charts) * s + 2 * _MARGIN > G - 2 * p:
+        return None  # the longest chart alone is wider than the texture
+    runs = [trial(charts, order, s, G, p, turns, rule, oriented) for rule in rules]
+    return _best_run(runs, G)[0]
+
+
 def _pack_at_density(
     uvs: Sequence[np.ndarray], faces: Sequence[np.ndarray], areas3d: ArrayLike, cfg: PackConfig
 ) -> PackResult:
@@ -761,33 +796,35 @@ def _pack_at_density(
     search finds) with the charts above ``cfg.max_chart_size`` texels scaled down: one trial
     of the placement rules at that scale, no search on the scale."""
     areas3d = np.asarray(areas3d, dtype=np.float64)
-    charts = _prepare(uvs, faces, areas3d)
     p = int(cfg.padding)
     s = float(cfg.texels_per_unit)
+    unlimited = None
     if s == 0:  # the density of the search, before the limit
-        s = pack_charts(uvs, faces, areas3d, config=replace(cfg, max_chart_size=0)).scale
-        s *= cfg.resolution
-    if cfg.max_chart_size > 0:
-        longest = np.array([float(ch.extent.max()) for ch in charts])
-        shrink = np.minimum(1.0, cfg.max_chart_size / (longest * s))
-        if (shrink < 1).any():  # a chart's uv area follows its area weight: scaled by shrink**2
-            charts = _prepare(uvs, faces, areas3d * shrink**2)
-    trial, rules, order, turns, oriented = _trial_setup(charts, cfg)
-    extent = max(float(ch.extent.max()) for ch in charts) * s
+        unlimited = pack_charts(uvs, faces, areas3d, config=replace(cfg, max_chart_size=0))
+        s = unlimited.scale * cfg.resolution
+    charts = _limited(uvs, faces, areas3d, s, cfg.max_chart_size)
+    if unlimited is not None and charts is None:
+        return unlimited  # no chart above the limit: the search's own layout
+    if charts is None:
+        charts = _prepare(uvs, faces, areas3d)
     if cfg.resolution > 0:
         G = int(cfg.resolution)
-        if extent + 2 * _MARGIN > G - 2 * p:
-            placed = None  # the longest chart alone is wider than the texture
-        else:
-            placed, _, _ = _best_run(
-                [trial(charts, order, s, G, p, turns, r, oriented) for r in rules], G
-            )
-        if placed is None:
-            raise SolverError(
-                f"{len(charts)} charts do not fit a {G}x{G} texture with padding {p} at "
-                f"{s:.6g} texels per unit length; lower the texel density or raise the resolution"
-            )
-        return _finish(charts, placed, s, G, p, 1, cfg.method)
+        tries = 1 if unlimited is None else _DERIVED_TRIES
+        for k in range(tries):
+            if k:  # the found density: a little less, the limit applied again
+                s *= _DERIVED_SHRINK
+                charts = _limited(uvs, faces, areas3d, s, cfg.max_chart_size) or _prepare(
+                    uvs, faces, areas3d
+                )
+            placed = _one_trial(charts, s, G, p, cfg)
+            if placed is not None:
+                return _finish(charts, placed, s, G, p, k + 1, cfg.method)
+        raise SolverError(
+            f"{len(charts)} charts do not fit a {G}x{G} texture with padding {p} at "
+            f"{s:.6g} texels per unit length; lower the texel density or raise the resolution"
+        )
+    trial, rules, order, turns, oriented = _trial_setup(charts, cfg)
+    extent = max(float(ch.extent.max()) for ch in charts) * s
     area = sum(ch.area for ch in charts) * s * s
     G = int(np.ceil(max(np.sqrt(area / _FIRST_UTILIZATION), extent + 2 * _MARGIN + 1))) + 2 * p
     n_trials = 0

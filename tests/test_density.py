@@ -144,3 +144,11 @@ def test_cli_density_flags_are_checked(plate, tmp_path, capsys, flag):
     assert main(["atlas", str(plate), "-o", str(tmp_path / "out"), *flag]) == 2
     assert capsys.readouterr().err.count("\n") == 1
     assert not (tmp_path / "out").exists()
+
+
+def test_max_chart_size_above_every_chart_changes_nothing():
+    uvs, faces, areas = _charts()
+    plain = pack_charts(uvs, faces, areas, config=PackConfig(resolution=256))
+    roomy = pack_charts(uvs, faces, areas, config=PackConfig(resolution=256, max_chart_size=250))
+    for a, b in zip(plain.uvs, roomy.uvs, strict=True):
+        np.testing.assert_array_equal(a, b)
