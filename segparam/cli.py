@@ -682,7 +682,12 @@ def build_parser() -> argparse.ArgumentParser:
         "parameterize .npz",
         "output folder",
         _cmd_pack,
-        [("--resolution", {"type": RESOLUTION}), ("--padding", {"type": PADDING})],
+        [
+            ("--resolution", {"type": RESOLUTION}),
+            ("--padding", {"type": PADDING}),
+            ("--texels-per-unit", {"type": TEXELS_PER_UNIT, "metavar": "X"}),
+            ("--max-chart-size", {"type": MAX_CHART_SIZE, "metavar": "N"}),
+        ],
     )
     return parser
 

@@ -152,3 +152,15 @@ def test_max_chart_size_above_every_chart_changes_nothing():
     roomy = pack_charts(uvs, faces, areas, config=PackConfig(resolution=256, max_chart_size=250))
     for a, b in zip(plain.uvs, roomy.uvs, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_pack_stage_command_takes_the_density(plate, tmp_path):
+    r, s, p = (str(tmp_path / f"{k}.npz") for k in "rsp")
+    assert main(["remesh", str(plate), "-o", r, "--remesh", "off", "--quiet"]) == 0
+    assert main(["segment", r, "-o", s, "--quiet"]) == 0
+    assert main(["parameterize", s, "-o", p, "--quiet"]) == 0
+    out = tmp_path / "out"
+    assert main(["pack", p, "-o", str(out), "--texels-per-unit", "30", "--quiet"]) == 0
+    atlas = json.loads((out / "report.json").read_text())["atlas"]
+    assert atlas["texels_per_unit"] == pytest.approx(30)
+    assert np.sqrt(3.0) * 30 < atlas["resolution"] < 2 * np.sqrt(3.0) * 30
