@@ -22,6 +22,8 @@ _EXPORTS = {
     "unwrap": "interop",
     # whole pipeline
     "build_atlas": "pipeline",
+    "build_atlases": "pipeline",
+    "MultiAtlas": "pipeline",
     "pack_atlas": "pipeline",
     "Atlas": "pipeline",
     "PipelineConfig": "pipeline",
@@ -75,6 +77,7 @@ __all__ = [
     "HessianSolver",
     "InvalidMeshError",
     "MeshFileError",
+    "MultiAtlas",
     "PackConfig",
     "PackResult",
     "PipelineConfig",
@@ -90,6 +93,7 @@ __all__ = [
     "__version__",
     "bake",
     "build_atlas",
+    "build_atlases",
     "clean",
     "config_from_dict",
     "load_config",
@@ -142,8 +146,10 @@ if TYPE_CHECKING:  # pragma: no cover
     from .parameterize import ChartMap, HessianSolver, parameterize_chart
     from .pipeline import (
         Atlas,
+        MultiAtlas,
         PipelineConfig,
         build_atlas,
+        build_atlases,
         config_from_dict,
         load_config,
         pack_atlas,

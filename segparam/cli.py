@@ -49,18 +49,21 @@ def _integer(low: int, high: int):
     return parse
 
 
-def _number(low: float):
-    """An argparse ``type``: a finite number ``>= low``."""
+def _number(low: float, *, above: bool = False):
+    """An argparse ``type``: a finite number ``>= low`` (``> low`` with ``above``)."""
+    relation = ">" if above else ">="
 
     def parse(text: str) -> float:
         try:
             value = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(
-                f"expected a number >= {low:g}, got {text!r}"
+                f"expected a number {relation} {low:g}, got {text!r}"
             ) from None
-        if not (math.isfinite(value) and value >= low):
-            raise argparse.ArgumentTypeError(f"must be a finite number >= {low:g}, got {text}")
+        if not (math.isfinite(value) and (value > low if above else value >= low)):
+            raise argparse.ArgumentTypeError(
+                f"must be a finite number {relation} {low:g}, got {text}"
+            )
         return value
 
     parse.__name__ = "number"
@@ -80,6 +83,10 @@ PADDING = _integer(0, _MAX_RESOLUTION // 2)
 MAX_CHARTS = _integer(1, 1_000_000)
 #: ``--max-distortion``: an angle distortion s1/s2, 1 at best.
 MAX_DISTORTION = _number(1.0)
+#: ``--texels-per-unit``: texels per unit of 3-D length.
+TEXELS_PER_UNIT = _number(0.0, above=True)
+#: ``--max-chart-size``: texels, 0 for no limit.
+MAX_CHART_SIZE = _integer(0, _MAX_RESOLUTION)
 
 
 @contextlib.contextmanager
@@ -189,6 +196,12 @@ def _config_from_args(args: argparse.Namespace):
         overrides["pack"]["resolution"] = args.resolution
     if getattr(args, "padding", None) is not None:
         overrides["pack"]["padding"] = args.padding
+    if getattr(args, "texels_per_unit", None) is not None:
+        overrides["pack"]["texels_per_unit"] = args.texels_per_unit
+        if getattr(args, "resolution", None) is None:  # the resolution follows the density
+            overrides["pack"]["resolution"] = 0
+    if getattr(args, "max_chart_size", None) is not None:
+        overrides["pack"]["max_chart_size"] = args.max_chart_size
     if getattr(args, "no_remesh", False):
         overrides["remesh"]["mode"] = "off"
     elif getattr(args, "remesh", None) is not None:
@@ -297,7 +310,9 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
     from .pictures import check_bakes
     from .pipeline import build_atlas
 
-    source = Path(args.input) if args.input else _data(DEFAULT_MESH_NAME)
+    if len(args.input) > 1:
+        return _atlas_of_several([Path(p) for p in args.input], args)
+    source = Path(args.input[0]) if args.input else _data(DEFAULT_MESH_NAME)
     stem = mesh_stem(source)
     if args.output:
         outdir = Path(args.output)
@@ -309,6 +324,8 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
     stem = atlas_stem(stem, outdir)
     check_output_folder(outdir, atlas_file_names(stem, pictures).values(), inputs=[source])
     t0 = time.perf_counter()
+    if args.uvs:
+        return _repack_file(source, outdir, stem, config, args)
     V, F = load_mesh(source)
     check_bakes(pictures.bakes, source, V)  # data files of the right length, before the work
     bar = _progress_bar(args.quiet)
@@ -344,6 +361,86 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
         )
         times = "  ".join(f"{k} {v:.1f}s" for k, v in atlas.timings.items())
         print(f"  time {time.perf_counter() - t0:.1f}s: {times}")
+        print(f"  wrote {len(written)} files to {outdir}/")
+    return 0
+
+
+def _atlas_of_several(sources: list[Path], args: argparse.Namespace) -> int:
+    """``segparam atlas a.obj b.ply ... -o OUT``: one texture, one texel density, one OBJ and
+    GLB per input, one report (:func:`segparam.pipeline.build_atlases`)."""
+    from .errors import ConfigError
+    from .io import (
+        all_file_names,
+        check_output_folder,
+        load_mesh,
+        mesh_stem,
+        multi_atlas_file_names,
+        unique_names,
+    )
+    from .pipeline import build_atlases
+
+    if args.uvs:
+        raise ConfigError(f"--uvs repacks one input mesh, got {len(sources)}")
+    if not args.output:
+        raise ConfigError(f"{len(sources)} input meshes make one atlas: name its folder with -o")
+    outdir = Path(args.output)
+    config = _config_from_args(args)
+    names = unique_names([mesh_stem(p) for p in sources])
+    files = multi_atlas_file_names("atlas", names, outdir)
+    check_output_folder(outdir, all_file_names(files), inputs=sources)
+    meshes = [load_mesh(p) for p in sources]  # every file read before any work
+    bar = _progress_bar(args.quiet)
+    try:
+        multi = build_atlases(
+            meshes,
+            config,
+            seed=args.seed,
+            names=names,
+            progress=bar.update if bar else None,
+        )
+    finally:
+        if bar:
+            bar.close()
+    written = multi.save(outdir, stem="atlas")
+    if not args.quiet:
+        r = multi.report()["texture"]
+        print(
+            f"{r['meshes']} meshes, {r['charts']} charts in one {r['resolution']}x"
+            f"{r['resolution']} texture at {r['texels_per_unit']:.4g} texels per unit, "
+            f"utilization {r['utilization']:.3f}"
+        )
+        for name, atlas, source in zip(names, multi.atlases, sources, strict=True):
+            print(f"  {name} ({source}): {len(atlas.F)} faces, {atlas.n_charts} charts")
+        print(f"  wrote {len(written)} files to {outdir}/")
+    return 0
+
+
+def _repack_file(source: Path, outdir: Path, stem: str, config, args: argparse.Namespace) -> int:
+    """``segparam atlas INPUT --uvs keep|repair``: the input's own uv islands as the charts."""
+    from .errors import MeshFileError
+    from .io import load_mesh
+    from .repack import RepackConfig, repack
+
+    mesh = load_mesh(source, uvs=True)
+    if mesh.uv is None:
+        raise MeshFileError(
+            f"{source}: has no uv on every face (OBJ vt with f v/vt corners, glTF TEXCOORD_0); "
+            f"--uvs {args.uvs} needs them"
+        )
+    cfg = RepackConfig(mode=args.uvs, pack=config.pack, split=config.split, seed=args.seed)
+    with _naming(source):
+        result = repack(mesh.V, mesh.F, mesh.uv, mesh.uv_F, config=cfg)
+    written = result.save(outdir, stem=stem)
+    if not args.quiet:
+        r = result.report()
+        print(
+            f"{source.name}: {len(r['islands'])} uv islands, {r['kept_islands']} kept, "
+            f"{r['recharted_islands']} re-charted; {r['charts']} charts, "
+            f"utilization {r['utilization']:.3f}"
+        )
+        for island in r["islands"]:
+            if not island["kept"]:
+                print(f"  island {island['island']} re-charted: {', '.join(island['reasons'])}")
         print(f"  wrote {len(written)} files to {outdir}/")
     return 0
 
@@ -419,6 +516,19 @@ def add_pipeline_options(p: argparse.ArgumentParser) -> None:
         "--resolution", type=RESOLUTION, help="texture size in texels, 1 to 16384 (default 1024)"
     )
     p.add_argument("--padding", type=PADDING, help="texels between charts and at the border (2)")
+    p.add_argument(
+        "--texels-per-unit",
+        type=TEXELS_PER_UNIT,
+        metavar="X",
+        help="texel density: texels per unit of 3-D length; the resolution follows, or is "
+        "checked against --resolution (default: the largest density that fits)",
+    )
+    p.add_argument(
+        "--max-chart-size",
+        type=MAX_CHART_SIZE,
+        metavar="N",
+        help="most texels a chart may span; larger charts are scaled down (0: no limit)",
+    )
     p.add_argument("--remesh", choices=["auto", "on", "off"], help="remeshing policy (auto)")
     p.add_argument("--no-remesh", action="store_true", help="keep the input's vertices")
     p.add_argument("--max-charts", type=MAX_CHARTS, help="most charts from the segmentation")
@@ -543,11 +653,29 @@ def build_parser() -> argparse.ArgumentParser:
     chart.add_argument("--quiet", action="store_true", help="print nothing on success")
     chart.set_defaults(func=_cmd_chart)
 
-    atlas = sub.add_parser("atlas", help="mesh file -> packed UV atlas (OBJ, GLB, PNGs, report)")
-    atlas.add_argument(
-        "input", nargs="?", help=f"mesh file (default: the sample {DEFAULT_MESH_NAME})"
+    atlas = sub.add_parser(
+        "atlas",
+        help="mesh file(s) -> packed UV atlas (OBJ, GLB, PNGs, report)",
+        description="One mesh: its atlas files. Several meshes: one texture at one texel "
+        "density, an OBJ and a GLB per mesh, one report (use 'segparam batch' for an atlas "
+        "per mesh).",
     )
-    atlas.add_argument("-o", "--output", help="output folder (default: ./<input stem>_atlas)")
+    atlas.add_argument(
+        "input",
+        nargs="*",
+        help=f"mesh file(s) (default: the sample {DEFAULT_MESH_NAME})",
+    )
+    atlas.add_argument(
+        "-o",
+        "--output",
+        help="output folder (default for one input: ./<input stem>_atlas; needed for several)",
+    )
+    atlas.add_argument(
+        "--uvs",
+        choices=["keep", "repair"],
+        help="repack the input's own uv islands (OBJ vt, glTF TEXCOORD_0) instead of charting: "
+        "keep them all, or repair (re-chart the islands that overlap, flip or leave the square)",
+    )
     add_pipeline_options(atlas)
     add_picture_options(atlas)
     atlas.set_defaults(func=_cmd_atlas)
@@ -588,7 +716,12 @@ def build_parser() -> argparse.ArgumentParser:
         "parameterize .npz",
         "output folder",
         _cmd_pack,
-        [("--resolution", {"type": RESOLUTION}), ("--padding", {"type": PADDING})],
+        [
+            ("--resolution", {"type": RESOLUTION}),
+            ("--padding", {"type": PADDING}),
+            ("--texels-per-unit", {"type": TEXELS_PER_UNIT, "metavar": "X"}),
+            ("--max-chart-size", {"type": MAX_CHART_SIZE, "metavar": "N"}),
+        ],
     )
     return parser
 

@@ -19,15 +19,17 @@ import numpy as np
 
 from .errors import MeshFileError
 from .io import (
+    all_file_names,
     atlas_file_names,
     atlas_stem,
     atomic_path,
     check_output_folder,
     error_reason,
+    multi_atlas_file_names,
     staged_outputs,
 )
 
-__all__ = ["checker_image", "render_uv_layout", "save_atlas", "write_obj"]
+__all__ = ["checker_image", "render_uv_layout", "save_atlas", "save_atlases", "write_obj"]
 
 
 # 17 significant digits write every float64 so that it reads back bit for bit (9 digits moved a
@@ -345,6 +347,69 @@ def save_atlas(
             f"{outdir}: cannot write the atlas files: {error_reason(exc)}"
         ) from None
     return [outdir / name for name in names.values()]
+
+
+def save_atlases(multi, outdir: str | os.PathLike, *, stem: str = "atlas") -> list[Path]:
+    """Write a :class:`~segparam.pipeline.MultiAtlas` (several meshes, one texture) into
+    ``outdir``: per mesh ``<name>.obj`` and ``<name>.glb``; shared by all, ``<stem>.mtl``
+    (every OBJ's material), ``<stem>_checker.png``, ``<stem>_uv.png`` (the layout of every
+    chart of every mesh) and ``report.json`` (:meth:`MultiAtlas.report`, a section per mesh).
+
+    Checked first and written all or nothing as :func:`save_atlas`.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
+    import json
+
+    outdir = Path(outdir)
+    names = multi_atlas_file_names(str(stem), multi.names, outdir)
+    files = all_file_names(names)
+    check_output_folder(outdir, files)
+    atlases = multi.atlases
+    # one layout picture: every mesh's uv rows one after another, charts numbered on
+    rows = np.cumsum([0] + [len(a.uv) for a in atlases])
+    charts = np.cumsum([0] + [a.n_charts for a in atlases])
+    uv = np.concatenate([a.uv for a in atlases])
+    uv_F = np.concatenate([a.uv_F + r for a, r in zip(atlases, rows[:-1], strict=True)])
+    labels = np.concatenate(
+        [a.chart_of_face + c for a, c in zip(atlases, charts[:-1], strict=True)]
+    )
+    try:
+        with staged_outputs(outdir) as stage:
+            checker = _checker_png(1024)
+            (stage / names["checker"]).write_bytes(checker)
+            (stage / names["mtl"]).write_text(
+                f"# written by segparam\nnewmtl atlas\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\n"
+                f"map_Kd {names['checker']}\n",
+                encoding="utf-8",
+            )
+            for atlas, files_of in zip(atlases, names["meshes"], strict=True):  # per mesh
+                write_obj(
+                    stage / files_of["obj"],
+                    atlas.V,
+                    atlas.F,
+                    uv=atlas.uv,
+                    uv_faces=atlas.uv_F,
+                    mtl=names["mtl"],
+                )
+                (stage / files_of["glb"]).write_bytes(
+                    _glb_bytes(atlas.V[atlas.uv_vertex], atlas.uv_F, atlas.uv, checker)
+                )
+            layout = render_uv_layout(uv, uv_F, labels=labels, size=multi.packing.resolution)
+            layout.save(stage / names["uv"], format="PNG")
+            (stage / names["report"]).write_text(
+                json.dumps(multi.report(), indent=1, sort_keys=False) + "\n", encoding="utf-8"
+            )
+    except MeshFileError:
+        raise
+    except OSError as exc:
+        raise MeshFileError(
+            f"{outdir}: cannot write the atlas files: {error_reason(exc)}"
+        ) from None
+    return [outdir / name for name in files]
 
 
 # glTF stores positions as float32 (24-bit mantissa). Up to this many times its size from the

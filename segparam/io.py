@@ -24,7 +24,7 @@ import re
 import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -46,10 +46,14 @@ __all__ = [
     "fit_name",
     "json_safe",
     "load_mesh",
+    "MeshUV",
+    "all_file_names",
+    "multi_atlas_file_names",
     "mesh_stem",
     "name_max",
     "split_suffix",
     "staged_outputs",
+    "unique_names",
 ]
 
 SUPPORTED_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf", ".gii", ".gii.gz")
@@ -67,18 +71,41 @@ def split_suffix(path: str | os.PathLike) -> tuple[str, str]:
     return plain.stem, plain.suffix.lower()
 
 
-def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+class MeshUV(NamedTuple):
+    """A mesh with the uv layout its file holds (:func:`load_mesh` with ``uvs=True``).
+
+    ``uv`` and ``uv_F`` are None when the file has no uv for every face (no OBJ ``vt`` on some
+    corner, no glTF ``TEXCOORD_0``, or a format without uvs); they are what
+    :func:`segparam.repack.repack` takes as ``uv`` and ``face_uv``.
+    """
+
+    V: np.ndarray
+    F: np.ndarray
+    uv: np.ndarray | None
+    uv_F: np.ndarray | None
+
+
+#: Formats whose uv :func:`load_mesh` reads (OBJ ``vt``, glTF/GLB ``TEXCOORD_0``).
+UV_SUFFIXES = (".obj", ".glb", ".gltf")
+
+
+def load_mesh(path: str | os.PathLike, *, uvs: bool = False) -> Any:
     """Read a triangle mesh; polygons are triangulated, nothing is merged or removed.
 
     Parameters
     ----------
     path : str or PathLike
+    uvs : bool
+        Also return the file's uv layout (see :class:`MeshUV`): OBJ ``vt`` with the ``f
+        v/vt`` corner indices (a polygon's triangles keep their corners' uvs), glTF/GLB
+        ``TEXCOORD_0`` (one uv per vertex). Other formats have none.
 
     Returns
     -------
     V : (n, 3) float64 ndarray
     F : (m, 3) int64 ndarray
         Possibly with defects: run :func:`segparam.clean.clean` before the pipeline.
+    (with ``uvs=True`` a :class:`MeshUV` ``(V, F, uv, uv_F)``)
 
     Raises
     ------
@@ -105,11 +132,17 @@ def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         raise MeshFileError(f"{path}: cannot read ({exc.strerror})") from None
     if not data:
         raise MeshFileError(f"{path}: file is empty")
+    uv = uv_F = None
     try:
         if suffix in (".gii", _GII_GZ):
             V, F = _load_gifti(data, gz=suffix == _GII_GZ)
+        elif uvs and suffix == ".obj":
+            V, F, uv, uv_F = _load_obj(data, uvs=True)
         elif suffix in _READERS:
             V, F = _READERS[suffix](data)
+        elif uvs:
+            V, F, uv = _load_trimesh(data, suffix, uvs=True)
+            uv_F = None if uv is None else F
         else:
             V, F = _load_trimesh(data, suffix)
     except MeshFileError as exc:
@@ -123,10 +156,12 @@ def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         V, F = check_mesh(V, F, allow_degenerate=True)
     except InvalidMeshError as exc:
         raise MeshFileError(f"{path}: {exc}") from None
+    if uvs:
+        return MeshUV(V, F, uv, uv_F)
     return V, F
 
 
-def _load_trimesh(data: bytes, suffix: str) -> tuple[np.ndarray, np.ndarray]:
+def _load_trimesh(data: bytes, suffix: str, *, uvs: bool = False) -> Any:
     """STL, GLB and glTF through trimesh (OBJ, PLY and OFF have readers of their own below)."""
     import io as _io
 
@@ -150,7 +185,16 @@ def _load_trimesh(data: bytes, suffix: str) -> tuple[np.ndarray, np.ndarray]:
         trimesh_log.setLevel(level)
     V = np.asarray(loaded.vertices, dtype=np.float64).reshape(-1, 3)
     F = np.asarray(loaded.faces, dtype=np.int64).reshape(-1, 3)
-    return V, F
+    if not uvs:
+        return V, F
+    uv = getattr(loaded.visual, "uv", None)  # TEXCOORD_0, one per vertex (trimesh's v up)
+    if uv is not None:
+        uv = np.asarray(uv, dtype=np.float64)
+        if uv.shape != (len(V), 2):
+            uv = None
+        elif not np.isfinite(uv).all():
+            raise MeshFileError("TEXCOORD_0 has NaN or infinite coordinates")
+    return V, F, uv
 
 
 def _stl_bytes(data: bytes) -> bytes:
@@ -275,7 +319,7 @@ def _ragged_arange(counts: np.ndarray) -> np.ndarray:
     return np.arange(int(counts.sum()), dtype=np.int64) - np.repeat(starts, counts)
 
 
-def _load_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+def _load_obj(data: bytes, *, uvs: bool = False) -> Any:
     """Vertices and triangulated faces of an OBJ file; every other kind of line is ignored.
 
     ``v`` lines give vertices (x y z, further values such as w or colours ignored), ``f`` lines
@@ -283,6 +327,9 @@ def _load_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     negative ones back from the last vertex read *before* that face line (streaming exporters
     interleave ``v`` and ``f -3 -2 -1``). Faces keep the file's order; polygons are triangulated
     by :func:`_triangulate`.
+
+    With ``uvs``, also ``uv`` (the ``vt`` lines' u v) and ``uv_F`` (the ``vt`` index of every
+    triangle corner, same triangulation), or None for both when some corner has no ``vt``.
     """
     text = _clean_text(data, "OBJ", comments=True)
     if b"\\" in text:
@@ -291,24 +338,94 @@ def _load_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     newlines = np.flatnonzero(buf == _NEWLINE)
     starts = np.zeros(len(newlines), dtype=np.int64)
     starts[1:] = newlines[:-1] + 1
-    # Keyword of each line: 'v' or 'f' followed by a space or the line end.
+    # Keyword of each line: 'v' or 'f' followed by a space or the line end ('vt' too for uvs).
     first = buf[starts]
-    bare = np.isin(buf[np.minimum(starts + 1, len(buf) - 1)], (_SPACE, _NEWLINE))
+    second = buf[np.minimum(starts + 1, len(buf) - 1)]
+    bare = np.isin(second, (_SPACE, _NEWLINE))
     kind = np.zeros(len(starts), dtype=np.uint8)
     kind[bare & (first == ord("v"))] = 1
     kind[bare & (first == ord("f"))] = 2
+    if uvs:
+        third = buf[np.minimum(starts + 2, len(buf) - 1)]
+        is_vt = (first == ord("v")) & (second == ord("t")) & np.isin(third, (_SPACE, _NEWLINE))
+        kind[is_vt] = 3
+        buf = buf.copy()
+        buf[starts[is_vt] + 1] = _SPACE  # 'vt' -> '  ': the second keyword byte goes too
     work = buf.copy()
     work[starts[kind > 0]] = _SPACE  # the keyword goes, the numbers stay
     per_byte = np.repeat(kind, newlines - starts + 1)
     V = _obj_vertices(work[per_byte == 1].tobytes(), np.flatnonzero(kind == 1) + 1)
     is_v = kind == 1
-    F = _obj_faces(
-        work[per_byte == 2].tobytes(),
-        np.flatnonzero(kind == 2) + 1,
-        np.cumsum(is_v)[kind == 2],
-        V,
+    face_text = work[per_byte == 2].tobytes()
+    face_lines = np.flatnonzero(kind == 2) + 1
+    F, corners, counts = _obj_faces(face_text, face_lines, np.cumsum(is_v)[kind == 2], V)
+    if not uvs:
+        return V, F
+    uv, uv_F = _obj_uvs(
+        work[per_byte == 3].tobytes(),
+        np.flatnonzero(kind == 3) + 1,
+        face_text,
+        face_lines,
+        np.cumsum(kind == 3)[kind == 2],
     )
-    return V, F
+    if uv is not None:  # the vertex triangulation, applied to the corners' vt indices
+        T = _triangulate(V[corners], np.arange(len(corners)), counts)
+        uv_F = uv_F[T]
+    return V, F, uv, uv_F
+
+
+#: An OBJ face corner's ``vt`` field: ``v/vt``, ``v/vt/vn`` -> ``vt``, ``v``, ``v//vn`` -> ``0``
+#: (an index OBJ never uses: the corner has no uv).
+_NO_VT_CORNER = re.compile(rb"(?<![^ \n])[^ /\n]+(?:/(?:/[^ \n]*)?)?(?![^ \n])")
+_VT_FIELD = re.compile(rb"(?<![^ \n])[^ /\n]*/([^ /\n]+)[^ \n]*")
+
+
+def _obj_uvs(
+    vt_text: bytes, vt_lines: np.ndarray, face_text: bytes, face_lines: np.ndarray, before
+) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """``vt`` coordinates ``(k, 2)`` (u v; a third w ignored) and the ``vt`` index of every face
+    corner, in corner order (0-based, negative indices resolved against ``before``: ``vt``
+    lines above each face line); ``(None, None)`` when some corner has no ``vt``."""
+    if not vt_text:
+        return None, None
+    token_line, counts = _token_table(vt_text)
+    short = np.flatnonzero(counts < 2)
+    if len(short):
+        i = short[0]
+        raise MeshFileError(f"texture vertex on line {vt_lines[i]} has {counts[i]} coordinates")
+    values = _numbers(vt_text, len(token_line), np.float64)
+    if values is None:
+        row, token = _bad_token(vt_text, _NOT_A_FLOAT)
+        where = f" on line {vt_lines[row]}" if row >= 0 else ""
+        raise MeshFileError(
+            f"texture vertex{where} has a coordinate that is not a number: {token!r}"
+        )
+    first = np.cumsum(counts) - counts
+    uv = values[first[:, None] + np.arange(2)]
+    if not np.isfinite(uv).all():
+        raise MeshFileError("texture vertices (vt) have NaN or infinite coordinates")
+    text = _VT_FIELD.sub(rb"\1", _NO_VT_CORNER.sub(b"0", face_text))
+    raw, token_line, _ = _obj_rows(
+        text,
+        face_lines,
+        np.int64,
+        element="face",
+        items="corners",
+        need="a face needs at least 3",
+        number="a texture index that is not a whole number",
+    )
+    if (raw == 0).any():
+        return None, None
+    base = before[token_line]
+    idx = np.where(raw > 0, raw - 1, base + raw)
+    bad = np.flatnonzero((idx < 0) | (idx >= len(uv)))
+    if len(bad):
+        j = bad[0]
+        raise MeshFileError(
+            f"face on line {face_lines[token_line[j]]} uses texture index {raw[j]}, "
+            f"out of range ({len(uv)} vt lines)"
+        )
+    return uv, idx
 
 
 def _join_continued(match: re.Match) -> bytes:
@@ -366,8 +483,11 @@ def _obj_vertices(text: bytes, lines: np.ndarray) -> np.ndarray:
     return values[first[:, None] + np.arange(3)]
 
 
-def _obj_faces(text: bytes, lines: np.ndarray, before: np.ndarray, V: np.ndarray) -> np.ndarray:
-    """Triangles of the ``f`` lines (keyword blanked) on file lines ``lines``.
+def _obj_faces(
+    text: bytes, lines: np.ndarray, before: np.ndarray, V: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Triangles of the ``f`` lines (keyword blanked) on file lines ``lines``, with the vertex
+    index of every corner and the corners per face (to triangulate the uvs the same way).
 
     ``before`` holds, per face line, the number of ``v`` lines above it: the base of negative
     indices.
@@ -401,7 +521,7 @@ def _obj_faces(text: bytes, lines: np.ndarray, before: np.ndarray, V: np.ndarray
         raise MeshFileError(
             f"face on line {line} uses vertex index {raw[j]}, out of range ({known} vertices)"
         )
-    return _triangulate(V, idx, counts)
+    return _triangulate(V, idx, counts), idx, counts
 
 
 # OFF header keywords: OFF, with optional per-vertex texture (ST), colour (C), normal (N) columns.
@@ -1051,6 +1171,47 @@ def atlas_file_names(stem: str, pictures=None) -> dict[str, str]:
         **(PictureOptions() if pictures is None else pictures).file_names(stem),
         "report": "report.json",
     }
+
+
+def unique_names(names: list[str]) -> list[str]:
+    """``names`` with repeats renamed ``<name>_2``, ``<name>_3``... (case-insensitively, as
+    file names on some systems)."""
+    seen: set[str] = set()
+    out = []
+    for name in names:  # loop over meshes
+        candidate, k = name, 1
+        while candidate.lower() in seen:
+            k += 1
+            candidate = f"{name}_{k}"
+        seen.add(candidate.lower())
+        out.append(candidate)
+    return out
+
+
+def multi_atlas_file_names(
+    stem: str, names: Iterable[str], outdir: str | os.PathLike
+) -> dict[str, Any]:
+    """The files :func:`segparam.export.save_atlases` writes into ``outdir``: the shared
+    ``mtl``, ``checker``, ``uv`` and ``report``, and ``meshes``: per mesh name its ``obj`` and
+    ``glb`` (names shortened by :func:`fit_name` to fit the file system)."""
+    shared = atlas_file_names(atlas_stem(stem, outdir))
+    limit = name_max(outdir) - len(".obj")
+    meshes = [fit_name(name, limit=limit) for name in names]
+    if len({m.lower() for m in meshes}) != len(meshes):
+        raise MeshFileError(f"{outdir}: two meshes would write files of the same name")
+    return {
+        "mtl": shared["mtl"],
+        "checker": shared["checker"],
+        "uv": shared["uv"],
+        "report": shared["report"],
+        "meshes": [{"obj": f"{m}.obj", "glb": f"{m}.glb"} for m in meshes],
+    }
+
+
+def all_file_names(names: dict[str, Any]) -> list[str]:
+    """Every file name of :func:`multi_atlas_file_names`."""
+    files = [v for k, v in names.items() if k != "meshes"]
+    return files + [f for mesh in names["meshes"] for f in mesh.values()]
 
 
 def error_reason(exc: BaseException) -> str:

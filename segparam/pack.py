@@ -45,7 +45,7 @@ import logging
 import os
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -59,6 +59,7 @@ from segparam.errors import (
     check_bool,
     check_choice,
     check_int,
+    check_number,
 )
 from segparam.quality import signed_areas
 from segparam.raster import footprint_conflicts, rasterize_footprint
@@ -151,6 +152,19 @@ class PackConfig:
     angle_steps : int
         Rotations per quarter turn that the "rest" rule tries for charts that are not
         rectangles: 6 means steps of 15 degrees; 1 means quarter turns only.
+    texels_per_unit : float
+        Texel density, texels per unit of 3-D length (xatlas's ``texelsPerUnit``): a 1 x 1
+        square takes ``texels_per_unit`` texels a side. 0 (default): the largest density at
+        which the charts fit `resolution`. Above 0 the charts are packed at exactly that
+        density; with ``resolution = 0`` the resolution follows (the texture grows from the
+        charts' area until they fit: :func:`pack_charts`), otherwise the charts must fit
+        `resolution` or packing fails with a :class:`SolverError`.
+    max_chart_size : int
+        Most texels a chart may span (xatlas's ``maxChartSize``: "charts larger than this will
+        be scaled down"): a chart whose minimum-area box's longer side would be longer at the
+        atlas's density is scaled down to this many texels (it alone gets fewer texels per
+        unit). 0 (default): no limit. With ``texels_per_unit = 0`` the density is first found
+        without the limit, then the charts above it are scaled down at that density.
 
     Raises
     ------
@@ -163,10 +177,25 @@ class PackConfig:
     method: str = "raster"
     rotate: bool = True
     angle_steps: int = 6
+    texels_per_unit: float = 0.0
+    max_chart_size: int = 0
 
     def __post_init__(self) -> None:
         # the same checks (and messages) as every stage's config; stored as plain Python values
-        object.__setattr__(self, "resolution", check_int("resolution", self.resolution, low=1))
+        object.__setattr__(
+            self, "texels_per_unit", check_number("texels_per_unit", self.texels_per_unit, low=0)
+        )
+        object.__setattr__(
+            self, "max_chart_size", check_int("max_chart_size", self.max_chart_size, low=0)
+        )
+        follows = self.texels_per_unit > 0 and self.resolution == 0  # chosen by the packer
+        if self.resolution == 0 and not follows:
+            raise ConfigError(
+                "resolution is 0; it may be 0 (it follows from the texel density) only with "
+                "texels_per_unit above 0"
+            )
+        low = 0 if follows else 1
+        object.__setattr__(self, "resolution", check_int("resolution", self.resolution, low=low))
         if self.resolution > MAX_RESOLUTION:
             raise ConfigError(
                 f"resolution is {self.resolution}; it must be at most {MAX_RESOLUTION}, the limit "
@@ -176,7 +205,7 @@ class PackConfig:
         object.__setattr__(self, "angle_steps", check_int("angle_steps", self.angle_steps, low=1))
         object.__setattr__(self, "rotate", check_bool("rotate", self.rotate))
         check_choice("method", self.method, _METHODS)
-        if self.resolution <= 2 * self.padding:
+        if not follows and self.resolution <= 2 * self.padding:
             raise ConfigError(
                 f"resolution {self.resolution} leaves no texel inside a border padding of "
                 f"{self.padding} texels on each side"
@@ -702,6 +731,120 @@ def _best_run(
     return placed, max(r[1] for r in runs), min(needs) if needs else None
 
 
+def _trial_setup(charts: list[_Chart], cfg: PackConfig) -> tuple:
+    """What every trial of :func:`pack_charts` shares: the trial function, its placement
+    rules, the charts' order (largest first; ties by the longer side, then by input order),
+    the quarter turns and the charts' turned outlines."""
+    turns, angles = (4, int(cfg.angle_steps)) if cfg.rotate else (1, 1)
+    if cfg.method == "raster":
+        trial, rules = _raster_trial, _RULE_ORDER
+    else:
+        trial, rules = _rect_trial, ("boxes",)
+    areas = np.array([ch.area for ch in charts])
+    longest = np.array([ch.extent.max() for ch in charts])
+    order = np.lexsort((np.arange(len(charts)), -longest, -areas))
+    oriented = _Angles(charts, angles) if cfg.method == "raster" else None
+    return trial, rules, order, turns, oriented
+
+
+#: ``resolution = 0``: the first texture tried holds the charts' area at this utilization (the
+#: raster packer's utilization on the test meshes is 0.6-0.8); a texture that is too small
+#: grows to the height the trial needed (or by :data:`_GROW` when it cannot tell).
+_FIRST_UTILIZATION = 0.8
+_GROW = 1.05
+
+
+#: ``max_chart_size`` at the density the search found: if the limited charts do not fit at it
+#: (the placement rules are greedy, not monotone), it is lowered by this factor, a few times.
+_DERIVED_SHRINK = 0.98
+_DERIVED_TRIES = 8
+
+
+def _limited(
+    uvs: Sequence[np.ndarray],
+    faces: Sequence[np.ndarray],
+    areas3d: np.ndarray,
+    s: float,
+    max_chart_size: int,
+) -> list[_Chart] | None:
+    """The charts with those spanning more than ``max_chart_size`` texels at ``s`` texels per
+    unit scaled down to that (their area weight times the factor squared), or None when no
+    chart is above the limit (or there is none)."""
+    if max_chart_size <= 0:
+        return None
+    charts = _prepare(uvs, faces, areas3d)
+    longest = np.array([float(ch.extent.max()) for ch in charts])
+    shrink = np.minimum(1.0, max_chart_size / (longest * s))
+    if not (shrink < 1).any():
+        return None
+    return _prepare(uvs, faces, areas3d * shrink**2)
+
+
+def _one_trial(charts: list[_Chart], s: float, G: int, p: int, cfg: PackConfig) -> list | None:
+    """The placement rules once at scale ``s`` on a ``G`` texture: the layout, or None."""
+    trial, rules, order, turns, oriented = _trial_setup(charts, cfg)
+    if max(float(ch.extent.max()) for ch in charts) * s + 2 * _MARGIN > G - 2 * p:
+        return None  # the longest chart alone is wider than the texture
+    runs = [trial(charts, order, s, G, p, turns, rule, oriented) for rule in rules]
+    return _best_run(runs, G)[0]
+
+
+def _pack_at_density(
+    uvs: Sequence[np.ndarray], faces: Sequence[np.ndarray], areas3d: ArrayLike, cfg: PackConfig
+) -> PackResult:
+    """:func:`pack_charts` at one texel density (``cfg.texels_per_unit``, or the one the
+    search finds) with the charts above ``cfg.max_chart_size`` texels scaled down: one trial
+    of the placement rules at that scale, no search on the scale."""
+    areas3d = np.asarray(areas3d, dtype=np.float64)
+    p = int(cfg.padding)
+    s = float(cfg.texels_per_unit)
+    unlimited = None
+    if s == 0:  # the density of the search, before the limit
+        unlimited = pack_charts(uvs, faces, areas3d, config=replace(cfg, max_chart_size=0))
+        s = unlimited.scale * cfg.resolution
+    charts = _limited(uvs, faces, areas3d, s, cfg.max_chart_size)
+    if unlimited is not None and charts is None:
+        return unlimited  # no chart above the limit: the search's own layout
+    if charts is None:
+        charts = _prepare(uvs, faces, areas3d)
+    if cfg.resolution > 0:
+        G = int(cfg.resolution)
+        tries = 1 if unlimited is None else _DERIVED_TRIES
+        for k in range(tries):
+            if k:  # the found density: a little less, the limit applied again
+                s *= _DERIVED_SHRINK
+                charts = _limited(uvs, faces, areas3d, s, cfg.max_chart_size) or _prepare(
+                    uvs, faces, areas3d
+                )
+            placed = _one_trial(charts, s, G, p, cfg)
+            if placed is not None:
+                return _finish(charts, placed, s, G, p, k + 1, cfg.method)
+        raise SolverError(
+            f"{len(charts)} charts do not fit a {G}x{G} texture with padding {p} at "
+            f"{s:.6g} texels per unit length; lower the texel density or raise the resolution"
+        )
+    trial, rules, order, turns, oriented = _trial_setup(charts, cfg)
+    extent = max(float(ch.extent.max()) for ch in charts) * s
+    area = sum(ch.area for ch in charts) * s * s
+    G = int(np.ceil(max(np.sqrt(area / _FIRST_UTILIZATION), extent + 2 * _MARGIN + 1))) + 2 * p
+    n_trials = 0
+    while G <= MAX_RESOLUTION:
+        n_trials += 1
+        placed, _, need = _best_run(
+            [trial(charts, order, s, G, p, turns, r, oriented) for r in rules], G
+        )
+        if placed is not None:
+            return _finish(charts, placed, s, G, p, n_trials, cfg.method)
+        grown = int(np.ceil(G * _GROW))
+        if need is not None:  # a square as tall as the trial needed, in area
+            grown = max(grown, int(np.ceil(np.sqrt((G - 2 * p) * (need - 2 * p)))) + 2 * p)
+        G = grown if G == MAX_RESOLUTION else min(grown, MAX_RESOLUTION)
+    raise SolverError(
+        f"{len(charts)} charts need more than a {MAX_RESOLUTION}x{MAX_RESOLUTION} texture at "
+        f"{s:.6g} texels per unit length (padding {p}); lower the texel density"
+    )
+
+
 def pack_charts(
     uvs: Sequence[np.ndarray],
     faces: Sequence[np.ndarray],
@@ -744,18 +887,11 @@ def pack_charts(
     The layout is deterministic.
     """
     cfg = PackConfig() if config is None else config
+    if cfg.texels_per_unit > 0 or cfg.max_chart_size > 0:
+        return _pack_at_density(uvs, faces, areas3d, cfg)
     charts = _prepare(uvs, faces, areas3d)
     G, p = int(cfg.resolution), int(cfg.padding)
-    turns, angles = (4, int(cfg.angle_steps)) if cfg.rotate else (1, 1)
-    if cfg.method == "raster":
-        trial, rules = _raster_trial, _RULE_ORDER
-    else:
-        trial, rules = _rect_trial, ("boxes",)
-    # largest first; ties by the longer side, then by input order
-    areas = np.array([ch.area for ch in charts])
-    longest = np.array([ch.extent.max() for ch in charts])
-    order = np.lexsort((np.arange(len(charts)), -longest, -areas))
-    oriented = _Angles(charts, angles) if cfg.method == "raster" else None
+    trial, rules, order, turns, oriented = _trial_setup(charts, cfg)
 
     # Safeguarded secant search on the scale. No scale above `hi` fits. A scale fits when one
     # of the placement rules fits the charts; the rules run side by side (one thread each: the

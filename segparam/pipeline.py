@@ -13,7 +13,7 @@ import logging
 import os
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -42,8 +42,10 @@ __all__ = [
     "MAX_RESOLUTION",
     "MAX_SEED",
     "Atlas",
+    "MultiAtlas",
     "PipelineConfig",
     "build_atlas",
+    "build_atlases",
     "chart_room",
     "check_seed",
     "config_from_dict",
@@ -84,14 +86,33 @@ def chart_room(resolution: int, padding: int) -> int:
 
 
 def _check_room(n_charts: int, pack: PackConfig, what: str) -> None:
-    """A :class:`ConfigError` when ``n_charts`` charts cannot fit the texture at all."""
-    room = chart_room(pack.resolution, pack.padding)
+    """A :class:`ConfigError` when ``n_charts`` charts cannot fit the texture at all (the
+    largest texture when the resolution follows from the texel density)."""
+    G, p = pack.resolution or MAX_RESOLUTION, pack.padding
+    room = chart_room(G, p)
     if n_charts > room:
-        G, p = pack.resolution, pack.padding
         raise ConfigError(
             f"{what} {n_charts} charts, but a {G}x{G} texture with padding {p} has room for at "
             f"most {room} (one texel each, {p} texels apart); raise the resolution or lower "
             "the padding"
+        )
+
+
+def _check_density(area: float, pack: PackConfig, what: str = "the mesh") -> None:
+    """A :class:`ConfigError` when charts of 3-D ``area`` cannot fit the texture at
+    ``pack.texels_per_unit`` whatever their shapes (they need ``area * texels_per_unit**2``
+    texels inside the padded border): known before any stage runs. Charts above
+    ``pack.max_chart_size`` shrink, so then nothing is known before packing."""
+    X = pack.texels_per_unit
+    if X <= 0 or pack.max_chart_size > 0:
+        return
+    G, p = pack.resolution or MAX_RESOLUTION, pack.padding
+    side = float(np.sqrt(area)) * X
+    if side > G - 2 * p:
+        raise ConfigError(
+            f"at {X:g} texels per unit {what} ({area:.6g} square units) needs at least "
+            f"{side:.0f}x{side:.0f} texels, more than a {G}x{G} texture with padding {p} holds; "
+            "lower the texel density or raise the resolution"
         )
 
 
@@ -344,6 +365,7 @@ def build_report(atlas: Atlas) -> dict[str, Any]:
             "utilization": atlas.packing.utilization,
             "resolution": atlas.packing.resolution,
             "padding": atlas.packing.padding,
+            "texels_per_unit": atlas.packing.scale * atlas.packing.resolution,
             "seam_length_over_sqrt_area": atlas.seam_length() / np.sqrt(total_area),
             **distortion(V[atlas.uv_vertex], atlas.uv_F, atlas.uv),
         },
@@ -389,10 +411,197 @@ def build_atlas(
         (:func:`chart_room`): checked as soon as the count is known (connected pieces after
         cleaning, charts after segmentation), not after packing.
     """
-    V, F = mesh_arrays(V, F)
     cfg = config or PipelineConfig()
     seed = check_seed(seed)
+    charted = _chart_mesh(V, F, cfg, seed, progress or (lambda stage, done, total: None))
+    return pack_atlas(
+        charted.V,
+        charted.F,
+        charted.charts,
+        config=cfg,
+        seed=seed,
+        timings=charted.timings,
+        segmentation=charted.segmentation,
+        cleaning=charted.cleaning,
+        remeshing=charted.remeshing,
+    )
+
+
+@dataclass(frozen=True)
+class MultiAtlas:
+    """Several meshes packed into one texture at one texel density (:func:`build_atlases`).
+
+    Attributes
+    ----------
+    atlases : tuple of Atlas
+        Per mesh, in input order, a whole :class:`Atlas` (its own vertices, faces, charts and
+        stage results) whose ``uv`` lies in the shared texture; its ``packing`` holds its own
+        charts' part of the shared one (same scale, resolution and padding; its utilization is
+        its charts' share).
+    packing : PackResult
+        The one packing of every mesh's charts (mesh by mesh, chart by chart).
+    names : tuple of str
+        Per mesh, the name of its report section and of its files (unique).
+    """
+
+    atlases: tuple[Atlas, ...]
+    packing: PackResult
+    names: tuple[str, ...]
+
+    def report(self) -> dict[str, Any]:
+        """``report.json`` of the shared texture: the texture's figures, then a section per
+        mesh (what :meth:`Atlas.report` says about it alone)."""
+        from .io import json_safe
+
+        packing = self.packing
+        return json_safe(
+            {
+                "texture": {
+                    "meshes": len(self.atlases),
+                    "charts": len(packing.uvs),
+                    "resolution": packing.resolution,
+                    "padding": packing.padding,
+                    "utilization": packing.utilization,
+                    "texels_per_unit": packing.scale * packing.resolution,
+                },
+                "meshes": [
+                    {"name": name, **atlas.report()}
+                    for name, atlas in zip(self.names, self.atlases, strict=True)
+                ],
+            }
+        )
+
+    def save(self, outdir: str | os.PathLike, *, stem: str = "atlas") -> list[Path]:
+        """Write one OBJ and one GLB per mesh (``<name>.obj``, ``<name>.glb``) sharing
+        ``<stem>.mtl``, ``<stem>_checker.png`` and ``<stem>_uv.png`` (every chart), and one
+        ``report.json``; all or nothing (see :func:`segparam.export.save_atlases`)."""
+        from .export import save_atlases
+
+        return save_atlases(self, outdir, stem=stem)
+
+
+def build_atlases(
+    meshes: Sequence[Any],
+    config: PipelineConfig | None = None,
+    *,
+    seed: int = 0,
+    names: Sequence[str] | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> MultiAtlas:
+    """Chart several meshes and pack all their charts into one texture (one texel density).
+
+    Each mesh goes through every stage of :func:`build_atlas` on its own (same config and
+    seed); then one :func:`segparam.pack.pack_charts` call packs the charts of all of them, so
+    they never overlap and every chart has the same texels per unit of 3-D length.
+
+    Parameters
+    ----------
+    meshes : sequence of (V, F) pairs or trimesh.Trimesh
+    config : PipelineConfig, optional
+    seed : int
+    names : sequence of str, optional
+        Per mesh, its report section and file names; default ``mesh0``, ``mesh1``, ...
+        Names met twice get ``_2``, ``_3``... .
+    progress : callable, optional
+        ``progress(stage, done, total)`` as in :func:`build_atlas`, for each mesh in turn.
+
+    Returns
+    -------
+    MultiAtlas
+
+    Raises
+    ------
+    InvalidMeshError, ConfigError, SolverError
+        As :func:`build_atlas`; a mesh's error names the mesh (``mesh 2: ...``). No mesh is an
+        :class:`InvalidMeshError`.
+    """
+    cfg = config or PipelineConfig()
+    seed = check_seed(seed)
+    meshes = list(meshes)
+    if not meshes:
+        raise InvalidMeshError("build_atlases needs at least one mesh")
+    if names is None:
+        names = [f"mesh{i}" for i in range(len(meshes))]
+    from .io import unique_names
+
+    names = unique_names([str(n) for n in names])
+    if len(names) != len(meshes):
+        raise ConfigError(f"{len(names)} names for {len(meshes)} meshes")
     report = progress or (lambda stage, done, total: None)
+    charted = []
+    for name, mesh in zip(names, meshes, strict=True):  # loop over meshes
+        pair = (mesh, None) if hasattr(mesh, "faces") else tuple(mesh)
+        if len(pair) != 2:
+            raise InvalidMeshError(f"{name}: expected a (V, F) pair or a trimesh.Trimesh")
+        try:
+            charted.append(_chart_mesh(*pair, cfg, seed, report))
+        except (InvalidMeshError, ConfigError) as exc:
+            raise type(exc)(f"{name}: {exc}") from None
+    sets = [c.charts.charts for c in charted]
+    total = sum(len(s) for s in sets)
+    _check_room(total, cfg.pack, "the meshes have")
+    _check_density(sum(float(face_areas(c.V, c.F).sum()) for c in charted), cfg.pack, "the meshes")
+    timings: dict[str, float] = {}
+    with _timed(timings, "pack"):
+        uvs, faces, areas = [], [], []
+        for c, charts in zip(charted, sets, strict=True):  # loop over meshes
+            area = face_areas(c.V, c.F)
+            uvs += [ch.uv for ch in charts]
+            faces += [ch.local_F for ch in charts]
+            areas += [float(area[ch.faces].sum()) for ch in charts]
+        packing = pack_charts(uvs, faces, areas, config=cfg.pack)
+    atlases = []
+    start = 0
+    for c, charts in zip(charted, sets, strict=True):  # loop over meshes
+        stop = start + len(charts)
+        part = dataclasses.replace(
+            packing,
+            uvs=packing.uvs[start:stop],
+            transforms=packing.transforms[start:stop],
+            utilization=float(
+                sum(
+                    np.abs(signed_areas(u, ch.local_F)).sum()
+                    for u, ch in zip(packing.uvs[start:stop], charts, strict=True)
+                )
+            ),
+        )
+        atlases.append(
+            _assemble(
+                c.V,
+                c.F,
+                c.charts,
+                part,
+                config=cfg,
+                seed=seed,
+                timings={**c.timings, **timings},
+                segmentation=c.segmentation,
+                cleaning=c.cleaning,
+                remeshing=c.remeshing,
+            )
+        )
+        start = stop
+    return MultiAtlas(atlases=tuple(atlases), packing=packing, names=tuple(names))
+
+
+@dataclass(frozen=True)
+class _Charted:
+    """A mesh through every stage but packing."""
+
+    V: np.ndarray
+    F: np.ndarray
+    charts: ChartSet
+    timings: dict
+    segmentation: Segmentation
+    cleaning: CleanResult
+    remeshing: RemeshResult
+
+
+def _chart_mesh(
+    V: Any, F: Any, cfg: PipelineConfig, seed: int, report: Callable[[str, int, int], None]
+) -> _Charted:
+    """Clean, remesh, segment and parameterize one mesh (:func:`build_atlas` before packing),
+    with the checks that can fail early (size, room for the charts, texel density)."""
+    V, F = mesh_arrays(V, F)
     n_faces = len(F) if hasattr(F, "__len__") else 0
     if n_faces > MAX_FACES:
         raise InvalidMeshError(
@@ -402,10 +611,11 @@ def build_atlas(
     with _timed(timings, "clean"):
         cleaned = clean(V, F)
     report("clean", 1, 1)
-    if len(cleaned.F) > chart_room(cfg.pack.resolution, cfg.pack.padding):
+    if len(cleaned.F) > chart_room(cfg.pack.resolution or MAX_RESOLUTION, cfg.pack.padding):
         # Charts are connected: at least one per connected piece (counted only when it can matter).
         pieces = connected_components(cleaned.F)[0]
         _check_room(pieces, cfg.pack, f"the mesh has {pieces} connected pieces, so at least")
+    _check_density(float(face_areas(cleaned.V, cleaned.F).sum()), cfg.pack)
 
     with _timed(timings, "remesh"):
         remeshed = remesh(cleaned.V, cleaned.F, config=cfg.remesh)
@@ -426,18 +636,7 @@ def build_atlas(
             seed=seed,
             progress=lambda done: report("parameterize", done, seg.n_charts),
         )
-
-    return pack_atlas(
-        Vm,
-        Fm,
-        chart_set,
-        config=cfg,
-        seed=seed,
-        timings=timings,
-        segmentation=seg,
-        cleaning=cleaned,
-        remeshing=remeshed,
-    )
+    return _Charted(Vm, Fm, chart_set, timings, seg, cleaned, remeshed)
 
 
 @contextlib.contextmanager
@@ -485,7 +684,36 @@ def pack_atlas(
             [float(area[c.faces].sum()) for c in charts],
             config=cfg.pack,
         )
+    return _assemble(
+        V,
+        F,
+        chart_set,
+        packing,
+        config=cfg,
+        seed=seed,
+        timings=timings,
+        segmentation=segmentation,
+        cleaning=cleaning,
+        remeshing=remeshing,
+    )
 
+
+def _assemble(
+    V: np.ndarray,
+    F: np.ndarray,
+    chart_set: ChartSet,
+    packing: PackResult,
+    *,
+    config: PipelineConfig,
+    seed: int,
+    timings: dict,
+    segmentation: Segmentation | None,
+    cleaning: CleanResult | None,
+    remeshing: RemeshResult | None,
+) -> Atlas:
+    """The :class:`Atlas` of a chart set whose charts ``packing`` placed (in chart order)."""
+    charts = chart_set.charts
+    cfg = config
     sizes = np.array([len(c.vertices) for c in charts])
     offsets = np.r_[0, np.cumsum(sizes)[:-1]]
     uv = np.concatenate(packing.uvs)

@@ -104,6 +104,10 @@ class RepackResult:
         The packer's result (``packing.transforms[c]`` maps chart ``c``'s input uv).
     recharted : ChartSet or None
         The parameterize stage's charts of the re-charted faces, or None.
+    V, F : ndarray
+        The mesh (checked), so that the result saves like an atlas (:meth:`save`).
+    mode : str
+        The :class:`RepackConfig` mode it was made with.
     """
 
     uv: np.ndarray
@@ -115,11 +119,15 @@ class RepackResult:
     chart_of_face: np.ndarray
     packing: PackResult
     recharted: ChartSet | None
+    V: np.ndarray | None = None
+    F: np.ndarray | None = None
+    mode: str = "keep"
 
     def report(self) -> dict[str, Any]:
         """JSON-ready: per island its faces, whether it was kept and why not; the packing."""
         faces = np.bincount(self.island_of_face, minlength=len(self.kept))
         return {
+            "mode": self.mode,
             "islands": [
                 {"island": i, "faces": int(faces[i]), "kept": bool(k), "reasons": list(r)}
                 for i, (k, r) in enumerate(zip(self.kept, self.reasons, strict=True))
@@ -130,7 +138,18 @@ class RepackResult:
             "utilization": self.packing.utilization,
             "resolution": self.packing.resolution,
             "padding": self.packing.padding,
+            "texels_per_unit": self.packing.scale * self.packing.resolution,
         }
+
+    def save(self, outdir: Any, *, stem: str = "mesh") -> list:
+        """Write the usual atlas files (OBJ/MTL/checker PNG, GLB, uv-layout PNG and
+        ``report.json`` with :meth:`report`) into ``outdir``, all or nothing
+        (:func:`segparam.export.save_atlas`)."""
+        if self.V is None or self.F is None:
+            raise ConfigError("this RepackResult has no mesh to save (V, F)")
+        from .export import save_atlas
+
+        return save_atlas(self, outdir, stem=stem)
 
 
 def _face_uv(face_uv: Any, n_uv: int | None = None) -> tuple[np.ndarray | None, np.ndarray]:
@@ -395,4 +414,7 @@ def repack(
         chart_of_face=chart_of_face,
         packing=packing,
         recharted=recharted,
+        V=V,
+        F=F,
+        mode=cfg.mode,
     )

@@ -73,6 +73,8 @@ BAD = {
     ("pack", "method"): ([1, True], ["skyline", "Raster"]),
     ("pack", "rotate"): ([1, 0, "yes", 1.0], ["true", "false"]),
     ("pack", "angle_steps"): ([6.0, True], [0, -6]),
+    ("pack", "texels_per_unit"): (["64", True], [-1, math.inf, math.nan]),
+    ("pack", "max_chart_size"): ([1.5, True, "8"], [-1]),
 }
 
 CASES = [
