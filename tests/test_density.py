@@ -8,6 +8,7 @@ import json
 
 import numpy as np
 import pytest
+from meshes import tri_grid
 
 from segparam.cli import main
 from segparam.errors import ConfigError, SolverError
@@ -16,7 +17,6 @@ from segparam.pack import PackConfig, min_area_rotation, pack_charts
 from segparam.pipeline import config_from_dict
 from segparam.quality import signed_areas
 from segparam.raster import footprint_conflicts
-from tests.meshes import tri_grid
 
 
 def _charts():

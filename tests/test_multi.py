@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 import trimesh
+from meshes import cylinder_patch, tri_grid
 
 from segparam.cli import main
 from segparam.errors import InvalidMeshError
@@ -17,7 +18,6 @@ from segparam.mesh import face_areas
 from segparam.pipeline import PipelineConfig, build_atlas, build_atlases
 from segparam.quality import signed_areas
 from segparam.raster import footprint_conflicts
-from tests.meshes import cylinder_patch, tri_grid
 
 CONFIG = PipelineConfig().replace(pack={"resolution": 256}, remesh={"mode": "off"})
 
