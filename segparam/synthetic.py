@@ -326,6 +326,50 @@ def brain_like_surface(
 
 
 # --------------------------------------------------------------------------------------------------
+# statistics
+
+
+def surface_statistics(V: np.ndarray, F: np.ndarray) -> dict[str, float]:
+    """Figures that tell how folded and how well triangulated a cortex-like surface is.
+
+    Used to compare synthetic brains with a real cortex (issue 16, ``benchmarks/bench_brains.py``):
+
+    * ``area_over_hull``: surface area / area of the convex hull (the gyrification index of
+      neuroimaging; fsaverage5's pial surface: 1.65, white: 1.60);
+    * ``abs_curvature``: integrated absolute Gaussian curvature / 4 pi, summing the absolute
+      angle defects (``mesh.angle_defect``); 1 for any convex surface (fsaverage5 pial: 69);
+    * ``min_angle_p1``, ``min_angle_p5``: 1st and 5th percentiles of the smallest angle of each
+      triangle, in degrees (60 for equilateral triangles);
+    * ``valence_std``: standard deviation of the vertex valence (0 for a regular mesh; 0.03 for
+      an icosahedral template, whose 12 original vertices have valence 5).
+
+    Parameters
+    ----------
+    V : (n, 3) float ndarray
+    F : (m, 3) int ndarray
+
+    Returns
+    -------
+    dict
+        The figures above plus ``faces`` and ``vertices``.
+    """
+    area = float(mesh.face_areas(V, F).sum())
+    hull = float(ConvexHull(V).area)
+    min_angle = np.degrees(mesh.corner_angles(V, F).min(axis=1))
+    valence = np.bincount(F.ravel(), minlength=len(V))
+    p1, p5 = np.percentile(min_angle, [1.0, 5.0])
+    return {
+        "faces": int(len(F)),
+        "vertices": int(len(V)),
+        "area_over_hull": area / hull,
+        "abs_curvature": float(np.abs(mesh.angle_defect(V, F)).sum() / (4.0 * np.pi)),
+        "min_angle_p1": float(p1),
+        "min_angle_p5": float(p5),
+        "valence_std": float(valence.std()),
+    }
+
+
+# --------------------------------------------------------------------------------------------------
 # topology helpers
 
 

@@ -213,3 +213,19 @@ def test_atlas_parcels():
         B = mesh.boundary_edges(F)
         perimeter = np.linalg.norm(V[B[:, 0]] - V[B[:, 1]], axis=1).sum()
         assert perimeter**2 / (4.0 * np.pi * mesh.face_areas(V, F).sum()) < 6.0
+
+
+def test_surface_statistics_on_convex_and_folded():
+    # a convex closed surface: area equals its hull's, |K| integrates to 4 pi (Gauss-Bonnet)
+    V, F = brain_like_surface(5000, folding=0.0)
+    s = synthetic.surface_statistics(V, F)
+    assert s["faces"] == len(F) and s["vertices"] == len(V)
+    assert s["area_over_hull"] == pytest.approx(1.0, abs=0.01)
+    assert s["abs_curvature"] == pytest.approx(1.0, abs=0.02)
+    assert 0.0 < s["min_angle_p1"] <= s["min_angle_p5"] <= 60.0
+    valence = np.bincount(F.ravel())
+    assert s["valence_std"] == pytest.approx(valence.std())
+    # a saddle-rich fold: negative curvature counts with its absolute value
+    W, G = brain_like_surface(5000, folding=3.0)
+    t = synthetic.surface_statistics(W, G)
+    assert t["abs_curvature"] > 3.0 and t["area_over_hull"] > s["area_over_hull"]

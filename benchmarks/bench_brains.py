@@ -1,0 +1,96 @@
+"""How folded are the synthetic brains next to a real cortex (issue 16)?
+
+Prints, for fsaverage5's left pial and white surfaces (the copies bundled in the nilearn wheel,
+read with ``segparam.io.load_mesh``; skipped with a note without nilearn) and for synthetic
+surfaces from :func:`segparam.synthetic.brain_like_surface`, the figures of
+:func:`segparam.synthetic.surface_statistics`: surface area / convex hull area, integrated
+absolute Gaussian curvature / 4 pi, 1st / 5th percentiles of the smallest triangle angle, vertex
+valence standard deviation, and the seconds the generator took. Writes the rows as JSON.
+
+Usage::
+
+    python benchmarks/bench_brains.py [--sizes 5000,20000,80000,320000] [--seed 0]
+                                      [--out benchmarks/results/brains.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from segparam.io import load_mesh
+from segparam.synthetic import brain_like_surface, surface_statistics
+
+COLUMNS = (
+    ("area_over_hull", "area/hull", "{:.2f}"),
+    ("abs_curvature", "|K|/4pi", "{:.1f}"),
+    ("min_angle_p1", "minang p1", "{:.1f}"),
+    ("min_angle_p5", "minang p5", "{:.1f}"),
+    ("valence_std", "val std", "{:.2f}"),
+    ("seconds", "seconds", "{:.2f}"),
+)
+
+
+def fsaverage5(surface: str) -> tuple[np.ndarray, np.ndarray] | None:
+    """fsaverage5's left ``pial`` or ``white`` surface from the nilearn wheel, or None."""
+    spec = importlib.util.find_spec("nilearn")  # locates the package without importing it
+    if spec is None or spec.origin is None:
+        return None
+    folder = Path(spec.origin).parent / "datasets" / "data" / "fsaverage5"
+    for name in (f"{surface}_left.gii.gz", f"{surface}.left.gii.gz"):
+        if (folder / name).is_file():
+            return load_mesh(folder / name)
+    return None
+
+
+def synthetic_rows(sizes: list[int], seed: int) -> list[tuple[str, dict]]:
+    """(name, keyword arguments of brain_like_surface) for every synthetic row."""
+    rows = []
+    for n in sizes:
+        rows.append((f"gentle folding 1, {n}", {"n_faces": n, "folding": 1.0}))
+        rows.append((f"gentle folding 3, {n}", {"n_faces": n, "folding": 3.0}))
+    return [(name, {**kw, "seed": seed}) for name, kw in rows]
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--sizes", default="5000,20000,80000,320000")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default="benchmarks/results/brains.json")
+    args = p.parse_args(argv)
+    sizes = [int(s) for s in args.sizes.split(",") if s]
+    results = []
+    for surface in ("pial", "white"):
+        mesh = fsaverage5(surface)
+        if mesh is None:
+            print(f"fsaverage5 {surface}: skipped (nilearn or its bundled surface missing)")
+            continue
+        results.append({"name": f"fsaverage5 {surface}", **surface_statistics(*mesh)})
+    for name, kwargs in synthetic_rows(sizes, args.seed):
+        t = time.perf_counter()
+        V, F = brain_like_surface(**kwargs)
+        seconds = time.perf_counter() - t
+        results.append(
+            {"name": name, "kwargs": kwargs, **surface_statistics(V, F), "seconds": seconds}
+        )
+    width = max(len(r["name"]) for r in results)
+    print(f"{'surface':<{width}} {'faces':>8} " + " ".join(f"{h:>10}" for _, h, _ in COLUMNS))
+    for r in results:
+        cells = [fmt.format(r[k]) if k in r else "-" for k, _, fmt in COLUMNS]
+        print(f"{r['name']:<{width}} {r['faces']:>8} " + " ".join(f"{c:>10}" for c in cells))
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(
+        json.dumps({"command": "python benchmarks/bench_brains.py", "rows": results}, indent=1)
+    )
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
