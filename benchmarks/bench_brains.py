@@ -52,8 +52,13 @@ def synthetic_rows(sizes: list[int], seed: int) -> list[tuple[str, dict]]:
     """(name, keyword arguments of brain_like_surface) for every synthetic row."""
     rows = []
     for n in sizes:
-        rows.append((f"gentle folding 1, {n}", {"n_faces": n, "folding": 1.0}))
-        rows.append((f"gentle folding 3, {n}", {"n_faces": n, "folding": 3.0}))
+        rows.append((f"cortex pial, {n}", {"n_faces": n}))
+        rows.append((f"cortex white, {n}", {"n_faces": n, "surface": "white"}))
+        rows.append(
+            (f"cortex icosahedral pial, {n}", {"n_faces": n, "connectivity": "icosahedral"})
+        )
+        rows.append((f"gentle folding 1, {n}", {"n_faces": n, "style": "gentle"}))
+        rows.append((f"gentle folding 3, {n}", {"n_faces": n, "style": "gentle", "folding": 3.0}))
     return [(name, {**kw, "seed": seed}) for name, kw in rows]
 
 
