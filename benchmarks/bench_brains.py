@@ -36,13 +36,13 @@ COLUMNS = (
 )
 
 
-def fsaverage5(surface: str) -> tuple[np.ndarray, np.ndarray] | None:
-    """fsaverage5's left ``pial`` or ``white`` surface from the nilearn wheel, or None."""
+def fsaverage5(surface: str, hemi: str = "left") -> tuple[np.ndarray, np.ndarray] | None:
+    """fsaverage5's ``pial`` or ``white`` surface of ``hemi`` from the nilearn wheel, or None."""
     spec = importlib.util.find_spec("nilearn")  # locates the package without importing it
     if spec is None or spec.origin is None:
         return None
     folder = Path(spec.origin).parent / "datasets" / "data" / "fsaverage5"
-    for name in (f"{surface}_left.gii.gz", f"{surface}.left.gii.gz"):
+    for name in (f"{surface}_{hemi}.gii.gz", f"{surface}.{hemi}.gii.gz"):
         if (folder / name).is_file():
             return load_mesh(folder / name)
     return None

@@ -9,7 +9,7 @@ neuroimaging tools do.
 Two fold styles. ``"cortex"`` (the default) is as folded as a real cortex: surface area / convex
 hull area and integrated |Gaussian curvature| within 15 % of fsaverage5's pial surface (1.65 and
 69 x 4 pi) at every size from 5k to 1M faces (``benchmarks/bench_brains.py``), with deep primary
-sulci (17.5 mm, walls at up to 70 degrees) and shallow secondary ones. ``"gentle"`` is the
+sulci (18 mm, walls up to 70 degrees steep) and shallower secondary ones. ``"gentle"`` is the
 earlier, much easier surface (1.03 and 4.6 at 20k faces).
 
 The surface is a radial graph over the unit sphere, ``V = rho(u) u``: a well-shaped triangulation of
@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg  # noqa: F401  (sp.linalg.eigsh)
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import ConvexHull
 
@@ -46,24 +47,36 @@ _RELAX_STEP = 0.6
 _MAX_HULL_FACES = 20000  # larger spheres are built by midpoint subdivision of a smaller hull
 
 # "cortex" style. Primary sulci: the zero set of a wave field of wavelength 38 mm, Gaussian grooves
-# 17.5 mm deep and 5.7 mm wide (1/e half-width): the gyrification of fsaverage5's pial surface
-# (area / hull 1.61 against 1.65 from 20k faces up). Secondary sulci: a second field at 18 mm.
+# 17.9 mm deep and 5.7 mm wide (1/e half-width): the gyrification of fsaverage5's pial surface
+# (area / hull 1.46-1.61 against 1.65, seeds 0-2, 5k-1M faces; deeper grooves raise it but push
+# |K| past the band at 20k). Secondary sulci: a second field at 18 mm.
 _CORTEX_WAVELENGTH = 38.0
-_CORTEX_DEPTH_RATIO = 0.46
+_CORTEX_DEPTH_RATIO = 0.47
 _CORTEX_WIDTH_RATIO = 0.15
 _CORTEX_IRREGULARITY = 0.6
+# Plane waves per fold field: with 10 (the gentle style's) the figures vary by +-15 % between
+# seeds, because a few waves make a few long parallel folds; 32 make a homogeneous labyrinth.
+_CORTEX_WAVES = 32
 _SECONDARY_WAVELENGTH = 18.0
 # Depth of the secondary grooves / their wavelength, per face count (interpolated in log size).
 # The discrete integrated |K| of a mesh is the surface's plus its sampling error, which is large on
-# coarse meshes and fades on fine ones; this depth was calibrated (benchmarks/bench_brains.py,
-# seed 0) so that the sum stays at fsaverage5 pial's 69 x 4 pi: without secondary grooves it
-# measured 55 / 70 / 60 / 42 / 40 at 5k / 20k / 80k / 320k / 1M faces.
+# coarse meshes and fades on fine ones; this depth was calibrated (seeds 0-2) so that the sum
+# stays near fsaverage5 pial's 69 x 4 pi: without secondary grooves the mean over seeds 0-2
+# measured 58 / 72 / 64 / 55 at 5k / 20k / 80k / 320k faces; with them 62-69, 67-78, 65-73,
+# 69-74, and 62-66 at 1M (seeds 0-1).
 _SECONDARY_DEPTH_TABLE = (
     (5_000.0, 20_000.0, 80_000.0, 320_000.0, 1_300_000.0),
-    (0.10, 0.01, 0.026, 0.05, 0.052),
+    (0.08, 0.0, 0.025, 0.05, 0.05),
 )
+# Regular (icosahedral) meshes sample the folds with less error, so they measure less |K|
+# (58-69 for seeds 0-2 from 5k to 320k faces with the table above): their secondary grooves are
+# deeper by this much.
+_ICOSAHEDRAL_SECONDARY_EXTRA = 0.015
 _CORTEX_RELAX_ITERATIONS = 10  # at the base level (<= 20k faces); 2 more after each subdivision
 _CORTEX_FINE_RELAX_ITERATIONS = 2
+# Finer levels are not relaxed: midpoint subdivision of a relaxed mesh keeps its shapes, and
+# relaxing 1M faces would triple the generation time.
+_MAX_RELAX_FACES = 400_000
 # White surface: 2.5 mm of cortex under the pial one (a typical cortical thickness), its grooves
 # wider by the same amount on each side (sulci open up, gyral crowns thin down).
 _THICKNESS = 2.5
@@ -158,18 +171,24 @@ def _ellipsoid(U: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 class _Waves:
     """Sum of plane waves ``c(x) = sum_k a_k cos(k_k . x + phase_k)`` with its gradient."""
 
-    def __init__(self, rng: np.random.Generator, wavelength: float, irregularity: float) -> None:
+    def __init__(
+        self,
+        rng: np.random.Generator,
+        wavelength: float,
+        irregularity: float,
+        n_waves: int = _N_WAVES,
+    ) -> None:
         base = rng.normal(size=3)
-        dirs = rng.normal(size=(_N_WAVES, 3))
+        dirs = rng.normal(size=(n_waves, 3))
         base /= np.linalg.norm(base)
         dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
         # irregularity 0: parallel folds; 1: isotropic labyrinth with spread widths.
         dirs = (1.0 - irregularity) * base + irregularity * dirs
         dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-        kmag = 2.0 * np.pi / wavelength * (1.0 + irregularity * rng.uniform(-0.35, 0.35, _N_WAVES))
+        kmag = 2.0 * np.pi / wavelength * (1.0 + irregularity * rng.uniform(-0.35, 0.35, n_waves))
         self.k = dirs * kmag[:, None]
-        self.phase = rng.uniform(0.0, 2.0 * np.pi, _N_WAVES)
-        self.amp = 1.0 + irregularity * rng.uniform(-0.5, 0.5, _N_WAVES)
+        self.phase = rng.uniform(0.0, 2.0 * np.pi, n_waves)
+        self.amp = 1.0 + irregularity * rng.uniform(-0.5, 0.5, n_waves)
         self.grad_scale = float(np.sqrt(np.sum(self.amp**2 * kmag**2) / 2.0))
 
     def __call__(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -346,7 +365,7 @@ class _CortexField:
             (_CORTEX_WAVELENGTH / frequency, _CORTEX_DEPTH_RATIO),
             (_SECONDARY_WAVELENGTH / frequency, secondary),
         ):
-            waves = _Waves(rng, wavelength, irregularity)
+            waves = _Waves(rng, wavelength, irregularity, _CORTEX_WAVES)
             width = _CORTEX_WIDTH_RATIO * wavelength
             self.levels.append((waves, folding * depth_ratio * wavelength, width))
         self.widen = widen
@@ -411,6 +430,8 @@ def _cortex_surface(
     secondary = float(
         np.interp(np.log(final_faces), np.log(_SECONDARY_DEPTH_TABLE[0]), _SECONDARY_DEPTH_TABLE[1])
     )
+    if connectivity == "icosahedral":
+        secondary += _ICOSAHEDRAL_SECONDARY_EXTRA
     field = _CortexField(
         rng,
         frequency=frequency,
@@ -418,14 +439,16 @@ def _cortex_surface(
         irregularity=irregularity,
         secondary=secondary,
     )
-    relax = folding > 0.0
+    V = None
     for level in range(levels + 1):
         if level > 0:
             U, F = _subdivide(U, F)
-        if relax:
+            V = None
+        if folding > 0.0 and len(F) <= _MAX_RELAX_FACES:
             n_iter = _CORTEX_RELAX_ITERATIONS if level == 0 else _CORTEX_FINE_RELAX_ITERATIONS
-            U, _ = _relax_on_sphere(U, F, field, n_iter)
-    V = _cortex_positions(U, field)
+            U, V = _relax_on_sphere(U, F, field, n_iter)
+    if V is None:
+        V = _cortex_positions(U, field)
     W = _cortex_positions(U, field.with_widening(_THICKNESS), inset=_THICKNESS)
     logger.debug("cortex surface: %d faces, secondary depth ratio %.3f", len(F), secondary)
     return V, W, F
@@ -454,12 +477,13 @@ def brain_like_surface(
     field. The surface is a radial graph over a sphere triangulation that is never flipped, so it
     is embedded (no self-intersections) at every size.
 
-    ``style="cortex"`` (default): as folded as a real cortex. Primary sulci every 38 mm, 17.5 mm
+    ``style="cortex"`` (default): as folded as a real cortex. Primary sulci every 38 mm, 17.9 mm
     deep, 9.5 mm wide at half depth (walls up to 70 degrees steep), and secondary sulci every
     18 mm. Measured against fsaverage5's pial surface (area / hull 1.65, integrated |K| / 4 pi
-    69; ``benchmarks/bench_brains.py``, seed 0): area / hull 1.51-1.61 and |K| / 4 pi 68-75
-    from 5k to 1M faces. The secondary depth is calibrated per size because the sampling error of
-    a coarse mesh adds to its measured curvature (see ``_SECONDARY_DEPTH_TABLE``).
+    69; ``benchmarks/bench_brains.py``, seeds 0-2): area / hull 1.46-1.61 and |K| / 4 pi 62-78
+    from 5k to 1M faces (1M faces in about 10 s). The secondary depth is calibrated per size
+    because the sampling error of a coarse mesh adds to its measured curvature (see
+    ``_SECONDARY_DEPTH_TABLE``).
 
     ``style="gentle"``: the earlier surface, sulci 15 mm apart, 6 mm deep and 5.5 mm wide at
     half depth at ``folding=1``, made longer (same depth) on meshes too coarse to resolve them:
@@ -862,6 +886,62 @@ def _brain_parcels(
     rest = perm[~np.isin(perm, hot_idx)]
     chosen = np.sort(np.concatenate([hot_idx, rest])[:n])
     return [parcels[k] for k in chosen], hot_arr[chosen]
+
+
+def _fiedler_order(faces: np.ndarray, adj: np.ndarray) -> np.ndarray:
+    """``faces`` sorted along the Fiedler vector of the face graph they induce."""
+    local = np.full(len(adj), -1, dtype=np.int64)
+    local[faces] = np.arange(len(faces))
+    i = np.repeat(np.arange(len(faces)), 3)
+    j = local[adj[faces]].ravel()
+    ok = j >= 0
+    n = len(faces)
+    A = sp.csr_matrix((np.ones(ok.sum()), (i[ok], j[ok])), shape=(n, n))
+    L = sp.diags(np.asarray(A.sum(axis=1)).ravel()) - A
+    # shift-invert near 0 on L + eps I: the two smallest eigenpairs (0 and the Fiedler value)
+    rng = np.random.default_rng(len(faces))
+    _, vec = sp.linalg.eigsh(
+        L + 1e-8 * sp.identity(n), k=2, sigma=0.0, which="LM", v0=rng.uniform(size=n)
+    )
+    fiedler = vec[:, 1] * np.sign(vec[np.argmax(np.abs(vec[:, 1])), 1])
+    return faces[np.argsort(fiedler, kind="stable")]
+
+
+def atlas_parcels(V: np.ndarray, F: np.ndarray, n: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Cut a connected closed surface into ``n`` parcels of nearly equal face counts.
+
+    Recursive spectral bisection of the face graph: a region meant for ``k`` parcels is split
+    along its Fiedler vector at the ``floor(k/2) / k`` quantile of its faces, down to one parcel
+    per region; each is then cleaned into a topological disk (ears dropped, holes filled), which
+    moves its size by a few faces. Used to cut real cortical surfaces (fsaverage5's pial, in
+    ``benchmarks/bench_solver.py``) like the 89-parcel set of issue 16. The loop runs over
+    regions (``n`` of them), not over faces.
+
+    Returns
+    -------
+    list of (V, F)
+        The parcels that are disks (one boundary loop), in bisection order.
+    """
+    F = np.asarray(F, dtype=np.int64)
+    adj = mesh.face_neighbors(F)
+    stack = [(np.arange(len(F)), int(n))]
+    regions = []
+    while stack:
+        faces, k = stack.pop()
+        if k == 1:
+            regions.append(faces)
+            continue
+        order = _fiedler_order(faces, adj)
+        cut = int(round(len(faces) * (k // 2) / k))
+        stack.append((np.sort(order[cut:]), k - k // 2))
+        stack.append((np.sort(order[:cut]), k // 2))
+    parcels = []
+    for R in regions:
+        faces = _clean_region(R, F, adj)
+        Vp, Fp = _submesh(V, F, faces)
+        if len(Fp) and _is_disk(Fp):
+            parcels.append((Vp, Fp))
+    return parcels
 
 
 def brain_like_parcels(
