@@ -756,55 +756,65 @@ def _submesh(V: np.ndarray, F: np.ndarray, faces: np.ndarray) -> tuple[np.ndarra
     return V[verts].copy(), inv.reshape(-1, 3).astype(np.int64)
 
 
-# Lloyd steps of the geodesic Voronoi parcels of the cortex style: random seeds give regions
-# from a fifth to twice the mean size; 4 steps narrow that spread.
-_LLOYD_ITERATIONS = 4
-# Regions cut per parcel asked for (cortex style): with 4 Lloyd steps about 40 % of the regions
-# fall within +-13 % of the mean size (measured at 460 faces, bounds 397-520).
-_CORTEX_REGIONS_PER_PARCEL = 3.0
-
-
 def _voronoi_regions(
     V: np.ndarray,
     F: np.ndarray,
     adj: np.ndarray,
     n_regions: int,
     rng: np.random.Generator,
-    *,
-    lloyd: int = 0,
 ) -> list[np.ndarray]:
     """Geodesic Voronoi regions of the face graph around ``n_regions`` random seed faces.
 
-    Multi-source Dijkstra over face-centroid distances; ``lloyd`` Lloyd steps move each seed to
-    the face of its region nearest the region's centroid, which evens out the region sizes.
-    Returns the face ids of every region.
+    Multi-source Dijkstra over face-centroid distances; returns the face ids of every region.
     """
     C = V[F].mean(axis=1)
     i = np.repeat(np.arange(len(F)), 3)
     j = adj.ravel()
     w = np.linalg.norm(C[i] - C[j], axis=1)
     G = sp.csr_matrix((w, (i, j)), shape=(len(F), len(F)))
-    area = mesh.face_areas(V, F)
     seeds = rng.choice(len(F), size=n_regions, replace=False)
-    for step in range(lloyd + 1):
-        _, _, source = dijkstra(G, indices=seeds, min_only=True, return_predecessors=True)
-        if step == lloyd:
-            break
-        # region of every face, as an index into seeds; area-weighted centroid of each region
-        region = np.searchsorted(np.sort(seeds), source)
-        region = np.argsort(seeds)[region]
-        weight = np.bincount(region, area, n_regions)
-        centre = (
-            np.column_stack([np.bincount(region, area * C[:, k], n_regions) for k in range(3)])
-            / weight[:, None]
-        )
-        d = np.linalg.norm(C - centre[region], axis=1)
-        order = np.lexsort((d, region))
-        first = np.searchsorted(region[order], np.arange(n_regions))
-        seeds = np.unique(order[first])
+    _, _, source = dijkstra(G, indices=seeds, min_only=True, return_predecessors=True)
     order = np.argsort(source, kind="stable")
     bounds = np.searchsorted(source[order], np.sort(seeds))
     return np.split(order, bounds[1:])
+
+
+# fsaverage5 cut into 89 parcels of about 460 faces: 45 per 20,480-face hemisphere. A parcel's
+# share of its hemisphere sets how many folds it straddles, so the cortex-style parcels keep it.
+_PARCELS_PER_HEMISPHERE = 45
+
+
+def _cortex_parcels(
+    n: int,
+    rng: np.random.Generator,
+    *,
+    mean_faces: int,
+    min_faces: int,
+    max_faces: int,
+    folding: float,
+    frequency: float,
+    connectivity: str,
+) -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray]:
+    """Parcels of the cortex style: whole hemispheres cut by `atlas_parcels`, ``n`` kept."""
+    parcels: list[tuple[np.ndarray, np.ndarray]] = []
+    for _ in range(int(np.ceil(n / _PARCELS_PER_HEMISPHERE))):
+        V, _, F = _cortex_surface(
+            _PARCELS_PER_HEMISPHERE * mean_faces,
+            folding=folding,
+            frequency=frequency,
+            irregularity=_CORTEX_IRREGULARITY,
+            connectivity=connectivity,
+            seed=int(rng.integers(2**31)),
+        )
+        k = max(1, int(round(len(F) / mean_faces)))
+        parcels += [p for p in atlas_parcels(V, F, k) if min_faces <= len(p[1]) <= max_faces]
+    if len(parcels) < n:
+        raise InvalidMeshError(
+            f"only {len(parcels)} of {n} parcels fit in [{min_faces}, {max_faces}] faces; "
+            "widen the bounds or move mean_faces towards their middle"
+        )
+    chosen = np.sort(rng.choice(len(parcels), size=n, replace=False))
+    return [parcels[k] for k in chosen], np.zeros(n, dtype=bool)
 
 
 def _brain_parcels(
@@ -823,44 +833,29 @@ def _brain_parcels(
     rng = np.random.default_rng(seed)
     n_regions = int(np.ceil(1.4 * n)) + 4
     if style == "cortex":
-        # regions of a deeply folded surface vary more in size: cut more, keep those that fit
-        n_regions = int(np.ceil(_CORTEX_REGIONS_PER_PARCEL * n)) + 4
-        V, _, F = _cortex_surface(
-            n_regions * mean_faces,
+        return _cortex_parcels(
+            n,
+            rng,
+            mean_faces=mean_faces,
+            min_faces=min_faces,
+            max_faces=max_faces,
             folding=folding,
             frequency=frequency,
-            irregularity=_CORTEX_IRREGULARITY,
             connectivity=connectivity,
-            seed=int(rng.integers(2**31)),
         )
-        # icosahedral sizes are quantized: keep the mean parcel size, not the region count
-        n_regions = max(n_regions, int(round(len(F) / mean_faces)))
-        if len(F) < n_regions * mean_faces:  # the nearest icosahedral level was the smaller one
-            V, _, F = _cortex_surface(
-                4 * len(F),
-                folding=folding,
-                frequency=frequency,
-                irregularity=_CORTEX_IRREGULARITY,
-                connectivity=connectivity,
-                seed=int(rng.integers(2**31)),
-            )
-            n_regions = int(round(len(F) / mean_faces))
-        beta = np.zeros(len(V))  # no hot spots: the whole surface is folded like a cortex
-    else:
-        n_hot = max(1, int(round(0.08 * n)))
-        V, F, beta = _brain_surface(
-            n_regions * mean_faces,
-            folding=folding,
-            frequency=frequency,
-            irregularity=0.6,
-            seed=int(rng.integers(2**31)),
-            n_hot=n_hot,
-            hot_radius=0.3 * np.sqrt(mean_faces * 0.45),
-            hot_factor=2.0,
-        )
+    n_hot = max(1, int(round(0.08 * n)))
+    V, F, beta = _brain_surface(
+        n_regions * mean_faces,
+        folding=folding,
+        frequency=frequency,
+        irregularity=0.6,
+        seed=int(rng.integers(2**31)),
+        n_hot=n_hot,
+        hot_radius=0.3 * np.sqrt(mean_faces * 0.45),
+        hot_factor=2.0,
+    )
     adj = mesh.face_neighbors(F)
-    lloyd = _LLOYD_ITERATIONS if style == "cortex" else 0
-    groups = _voronoi_regions(V, F, adj, n_regions, rng, lloyd=lloyd)
+    groups = _voronoi_regions(V, F, adj, n_regions, rng)
     hot_face = beta[F].mean(axis=1) > 0.5
     parcels: list[tuple[np.ndarray, np.ndarray]] = []
     hot: list[bool] = []
@@ -958,13 +953,18 @@ def brain_like_parcels(
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Disk-shaped sub-meshes cut from a folded hemisphere like the regions of a brain atlas.
 
-    One `brain_like_surface` hemisphere of about ``1.4 n mean_faces`` faces is split into
-    geodesic Voronoi regions around seeded random face seeds (multi-source Dijkstra on the face
-    graph); each region is cleaned into a topological disk, and ``n`` of those within the size
-    bounds are returned. With ``style="cortex"`` (default) the hemisphere is as folded as a real
-    cortex, so the parcels straddle deep sulci like the regions of fsaverage5's pial surface.
-    With ``style="gentle"`` it carries a few hot spots of doubled fold frequency (one at the
-    frontal pole), and about 10-20 % of the parcels carry them in part of their area.
+    ``style="cortex"`` (default): hemispheres as folded as a real cortex, of
+    ``45 mean_faces`` faces each, are cut whole into 45 parcels each by :func:`atlas_parcels`
+    (recursive spectral bisection, equal face counts), like fsaverage5's two 20,480-face
+    hemispheres cut into 89 parcels of about 460 faces; ``n`` of those within the size bounds
+    are returned (seeded choice). A parcel's share of its hemisphere, hence the folds it
+    straddles, is the real set's.
+
+    ``style="gentle"``: one hemisphere of about ``1.4 n mean_faces`` faces with a few hot spots
+    of doubled fold frequency (one at the frontal pole), split into geodesic Voronoi regions
+    around seeded random face seeds (multi-source Dijkstra on the face graph), each cleaned
+    into a topological disk; ``n`` of those within the size bounds are returned, about 10-20 %
+    of them carrying a hot spot in part of their area.
 
     Parameters
     ----------
