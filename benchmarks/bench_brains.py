@@ -7,9 +7,16 @@ surfaces from :func:`segparam.synthetic.brain_like_surface`, the figures of
 absolute Gaussian curvature / 4 pi, 1st / 5th percentiles of the smallest triangle angle, vertex
 valence standard deviation, and the seconds the generator took. Writes the rows as JSON.
 
+With ``--pipeline SIZES`` it runs instead the whole pipeline (``build_atlas``, seed 0) on the
+default hemispheres of those face counts, with ``pipelines/default.toml`` and
+``pipelines/brain.toml``, and xatlas side by side (``bench_atlas.run_xatlas``: its defaults,
+1024 texels, padding 2); per row: seconds, charts, bijective charts, faces in and out, flipped
+triangles, utilization, distortion, and whether a second run gave the same bytes (smallest size).
+
 Usage::
 
     python benchmarks/bench_brains.py [--sizes 5000,20000,80000,320000] [--seed 0]
+                                      [--pipeline 20000,160000,300000]
                                       [--out benchmarks/results/brains.json]
 """
 
@@ -62,12 +69,81 @@ def synthetic_rows(sizes: list[int], seed: int) -> list[tuple[str, dict]]:
     return [(name, {**kw, "seed": seed}) for name, kw in rows]
 
 
+def pipeline_rows(sizes: list[int], seed: int) -> list[dict]:
+    """The whole pipeline (default and brain configs) and xatlas on default hemispheres."""
+    import sys
+
+    from segparam.pipeline import build_atlas, load_config
+
+    here = Path(__file__).resolve().parent
+    sys.path.insert(0, str(here))
+    from bench_atlas import measures, run_xatlas
+
+    rows = []
+    for n in sizes:
+        V, F = brain_like_surface(n, seed=seed)
+        for name in ("default", "brain"):
+            cfg = load_config(str(here.parent / "pipelines" / f"{name}.toml"))
+            t = time.perf_counter()
+            atlas = build_atlas(V, F, cfg, seed=0)
+            seconds = time.perf_counter() - t
+            report = atlas.report()["atlas"]
+            row = {"faces": len(F), "tool": f"segparam ({name})", "seconds": seconds}
+            row.update(
+                measures(atlas.V[atlas.uv_vertex], atlas.uv, atlas.uv_F, atlas.chart_of_face)
+            )
+            row["bijective_charts"] = int(report["bijective_charts"])
+            row["faces_out"] = int(len(atlas.uv_F))
+            row["stages"] = {k: round(v, 3) for k, v in atlas.timings.items()}
+            if n == min(sizes):
+                again = build_atlas(V, F, cfg, seed=0)
+                row["deterministic"] = bool(
+                    again.uv.tobytes() == atlas.uv.tobytes()
+                    and again.uv_F.tobytes() == atlas.uv_F.tobytes()
+                )
+            rows.append(row)
+            print(_pipeline_line(row), flush=True)
+        row = {"faces": len(F), **run_xatlas(V, F)}
+        rows.append(row)
+        print(_pipeline_line(row), flush=True)
+    return rows
+
+
+def _pipeline_line(r: dict) -> str:
+    cells = [
+        f"{r['faces']:>8}",
+        f"{r['tool']:<19}",
+        f"{r['seconds']:8.2f} s",
+        f"charts {r['charts']:>4}",
+        f"bijective {r.get('bijective_charts', '-')!s:>4}",
+        f"faces out {r.get('faces_out', '-')!s:>7}",
+        f"flipped {r.get('flipped', '-')!s:>3}",
+        f"util {r['utilization']:.3f}",
+        f"L2 {r['l2_stretch']:.3f}",
+        f"s1/s2 {r['angle_distortion']:.3f}",
+    ]
+    if "deterministic" in r:
+        cells.append(f"deterministic {r['deterministic']}")
+    if "stages" in r:
+        cells.append(" ".join(f"{k} {v:.2f}" for k, v in r["stages"].items()))
+    return "  ".join(cells)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--sizes", default="5000,20000,80000,320000")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--pipeline", default=None, help="face counts: run the pipeline instead")
     p.add_argument("--out", default="benchmarks/results/brains.json")
     args = p.parse_args(argv)
+    if args.pipeline:
+        rows = pipeline_rows([int(s) for s in args.pipeline.split(",") if s], args.seed)
+        out = Path(args.out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        command = f"python benchmarks/bench_brains.py --pipeline {args.pipeline}"
+        out.write_text(json.dumps({"command": command, "rows": rows}, indent=1, default=str))
+        print(f"wrote {out}")
+        return 0
     sizes = [int(s) for s in args.sizes.split(",") if s]
     results = []
     for surface in ("pial", "white"):
