@@ -184,9 +184,9 @@ def test_small_parcels_are_disks(small_parcels):
 
 
 def test_parcels_deterministic():
-    a = brain_like_parcels(6, mean_faces=300, min_faces=100, max_faces=900, seed=4)
-    b = brain_like_parcels(6, mean_faces=300, min_faces=100, max_faces=900, seed=4)
-    c = brain_like_parcels(6, mean_faces=300, min_faces=100, max_faces=900, seed=5)
+    a = brain_like_parcels(6, mean_faces=150, min_faces=50, max_faces=450, seed=4)
+    b = brain_like_parcels(6, mean_faces=150, min_faces=50, max_faces=450, seed=4)
+    c = brain_like_parcels(6, mean_faces=150, min_faces=50, max_faces=450, seed=5)
     assert all(
         x[0].tobytes() == y[0].tobytes() and x[1].tobytes() == y[1].tobytes()
         for x, y in zip(a, b, strict=True)
