@@ -12,9 +12,12 @@ Part 1, scaling
     machine may be shared, so the best run is the least disturbed one.
 
 Part 2, quality on cortex-like parcels (the paper's comparison)
-    ``brain_like_parcels(n, mean_faces=500, min_faces=250, max_faces=1000, folding=2.0, seed=0)``,
-    each parcel remeshed with ``remesh(..., RemeshConfig(mode="on"))`` as in the paper (parcels
-    where remeshing raises or keeps the input are used as they are, and counted). Each variant
+    ``--parcel-set``: ``cortex`` (default; ``brain_like_parcels(n, mean_faces=460,
+    min_faces=380, max_faces=560, seed=0)`` of the realistic default surface, as cut),
+    ``cortex-ico`` (the same with icosahedral connectivity), ``fsaverage5`` (real parcels: the
+    fsaverage5 pial hemispheres cut by ``synthetic.atlas_parcels``), ``gentle`` (the earlier set:
+    ``style="gentle", folding=2.0``, 250-1000 faces, each remeshed with ``RemeshConfig(mode="on")``
+    as in the paper; parcels where remeshing fails are used as they are, and counted). Each variant
     (method, tangent, refinement) maps every parcel; reported: bijective maps, median angle
     distortion (all maps, bijective maps), median L2 stretch, failures (exceptions) and seconds.
     Baselines: plain ARAP from the planar projection (:func:`segparam.split.project_chart`, so
@@ -34,6 +37,7 @@ Part 3, factorization (``--part factor``, not in ``all``)
 Usage::
 
     python benchmarks/bench_solver.py [--sizes 1000,10000,100000,300000] [--parcels 89]
+                                      [--parcel-set cortex|cortex-ico|fsaverage5|gentle]
                                       [--quick] [--out benchmarks/results/solver.json]
 """
 
@@ -227,13 +231,46 @@ def print_scaling(rows: list) -> None:
 # ---------------------------------------------------------------------------------------------
 
 
-def make_parcels(n: int) -> tuple[list, int]:
-    """The remeshed parcels, and how many had to be kept as generated."""
+PARCEL_SETS = ("cortex", "cortex-ico", "fsaverage5", "gentle")
+
+
+def make_parcels(n: int, parcel_set: str = "cortex") -> tuple[list, int, str]:
+    """The parcels of one set, how many could not be remeshed, and a description.
+
+    ``cortex`` / ``cortex-ico``: ``brain_like_parcels(n, mean_faces=460, min_faces=380,
+    max_faces=560, seed=0)`` of the default (realistic) surface with uniform / icosahedral
+    connectivity, as cut. ``fsaverage5``: fsaverage5's left and right pial surfaces (nilearn's
+    bundled copies) cut by :func:`segparam.synthetic.atlas_parcels` into ``ceil(n/2)`` and
+    ``floor(n/2)`` parcels (453-480 faces for n = 89), as cut. ``gentle``: the earlier set,
+    ``style="gentle", folding=2.0``, 250-1000 faces, each remeshed as in the paper (parcels
+    where remeshing fails are kept as generated, and counted).
+    """
     from segparam.parameterize import check_chart
     from segparam.remesh import RemeshConfig, remesh
-    from segparam.synthetic import brain_like_parcels
+    from segparam.synthetic import atlas_parcels, brain_like_parcels
 
-    raw = brain_like_parcels(n, mean_faces=500, min_faces=250, max_faces=1000, folding=2.0, seed=0)
+    if parcel_set in ("cortex", "cortex-ico"):
+        connectivity = "icosahedral" if parcel_set == "cortex-ico" else "uniform"
+        raw = brain_like_parcels(
+            n, mean_faces=460, min_faces=380, max_faces=560, connectivity=connectivity, seed=0
+        )
+        return [check_chart(V, F) for V, F in raw], 0, f"{parcel_set} parcels, as cut"
+    if parcel_set == "fsaverage5":
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from bench_brains import fsaverage5
+
+        out = []
+        for hemi, k in (("left", (n + 1) // 2), ("right", n // 2)):
+            mesh = fsaverage5("pial", hemi)
+            if mesh is None:
+                raise SystemExit(
+                    "fsaverage5 needs nilearn's bundled surfaces (pip install nilearn)"
+                )
+            out += [check_chart(V, F) for V, F in atlas_parcels(*mesh, k)]
+        return out, 0, "fsaverage5 pial parcels (left + right), as cut"
+    raw = brain_like_parcels(
+        n, mean_faces=500, min_faces=250, max_faces=1000, folding=2.0, style="gentle", seed=0
+    )
     out, kept = [], 0
     for V, F in raw:
         try:
@@ -244,7 +281,7 @@ def make_parcels(n: int) -> tuple[list, int]:
         except Exception:  # noqa: BLE001 - any failure: keep the generated parcel, counted
             out.append((V, F))
             kept += 1
-    return out, kept
+    return out, kept, "gentle parcels (folding 2.0), remeshed"
 
 
 def _hessian_variant(method: str, tangent: str, refine: str):
@@ -434,7 +471,12 @@ def _shifted_hessian(surface: str, n: int):
         from segparam.synthetic import brain_like_parcels
 
         V, F = brain_like_parcels(
-            1, mean_faces=2 * n, min_faces=int(1.8 * n), max_faces=int(2.2 * n), folding=2.0
+            1,
+            mean_faces=2 * n,
+            min_faces=int(1.8 * n),
+            max_faces=int(2.2 * n),
+            folding=2.0,
+            style="gentle",
         )[0]
     else:
         V, F = wavy_sheet(n, surface)
@@ -494,6 +536,7 @@ def main(argv: list[str] | None = None) -> int:
         "--quality-threads", type=int, default=1, help="BLAS threads in part 2 (0: no limit)"
     )
     p.add_argument("--part", choices=("all", "scaling", "quality", "factor"), default="all")
+    p.add_argument("--parcel-set", choices=PARCEL_SETS, default="cortex", help="parcels of part 2")
     p.add_argument(
         "--surfaces", default="sheet,bump", help="scaling surfaces: sheet (developable), bump"
     )
@@ -537,13 +580,14 @@ def main(argv: list[str] | None = None) -> int:
 
     if args.part in ("all", "quality"):
         t0 = time.perf_counter()
-        parcels, kept = make_parcels(n_parcels)
+        parcels, kept, what = make_parcels(n_parcels, args.parcel_set)
         prep = time.perf_counter() - t0
         nv = np.array([len(V) for V, _ in parcels])
+        nf = np.array([len(F) for _, F in parcels])
         print(
-            f"\nQuality: {len(parcels)} cortex-like parcels (folding 2.0, remeshed; {kept} kept "
-            f"as generated), {nv.min()}-{nv.max()} vertices (median {int(np.median(nv))}); "
-            f"generation + remeshing {prep:.1f} s"
+            f"\nQuality: {len(parcels)} {what} ({kept} not remeshed), {nf.min()}-{nf.max()} "
+            f"faces, {nv.min()}-{nv.max()} vertices (median {int(np.median(nv))}); "
+            f"preparation {prep:.1f} s"
         )
         limit, threads = blas_limit(args.quality_threads)
         print(f"BLAS threads: {threads}", flush=True)
@@ -554,7 +598,10 @@ def main(argv: list[str] | None = None) -> int:
             for e in r["errors"][:3]:
                 print(f"  {r['variant']}: {e}")
         result["quality"] = {
+            "parcel_set": args.parcel_set,
             "parcels": len(parcels),
+            "faces_min": int(nf.min()),
+            "faces_max": int(nf.max()),
             "kept_unremeshed": kept,
             "vertices_min": int(nv.min()),
             "vertices_median": float(np.median(nv)),

@@ -14,7 +14,7 @@ HERE = Path(__file__).resolve().parent
 
 
 def main() -> None:
-    parcels = brain_like_parcels(12, mean_faces=1500, min_faces=1000, max_faces=2500, seed=7)
+    parcels = brain_like_parcels(12, mean_faces=1850, min_faces=1000, max_faces=2500, seed=7)
     V, F = max(parcels, key=lambda p: len(p[1]))
     write_obj(HERE / "brain_parcel.obj", V, F)
     # The quick start's default mesh: a closed, folded hemisphere of 20k faces.

@@ -100,6 +100,12 @@ MIN_POINTS = 6
 MIN_RCOND = 0.03
 #: Most points added to one neighbourhood for conditioning.
 MAX_EXTEND = 6
+#: Extend only boundary neighbourhoods (issue 16). On folded cortex, a 1-ring squeezed by a fold
+#: projects to a nearly degenerate design on the normals plane; extending it adds points on one
+#: side of the fold and its Hessian flips triangles nearby, while the truncated pseudo-inverse of
+#: the unextended fit (:func:`local_hessians`) stays benign. Measured on 89 fsaverage5 pial
+#: parcels (``bench_solver.py --parcel-set fsaverage5``), raw map: see BENCHMARKS.md.
+EXTEND_BOUNDARY_ONLY = True
 
 
 @dataclass(frozen=True)
@@ -539,6 +545,8 @@ def hessian_matrix(
         Symmetric positive semi-definite; ``K @ 1 = 0``.
     """
     extra = np.zeros(len(V), dtype=np.int64)
+    on_boundary = np.zeros(len(V), dtype=bool)
+    on_boundary[boundary_edges(F).ravel()] = True
     check = None  # vertices whose neighbourhood changed: all of them at first
     A = vertex_adjacency(F, len(V))
     ptr, idx = neighbourhoods(V, F, min_points=min_points, extra=extra, adjacency=A)
@@ -547,6 +555,8 @@ def hessian_matrix(
     b1, b2 = tangent_frames(V, F, ptr, idx, tangent=tangent)
     for _ in range(MAX_EXTEND):
         bad = ill_conditioned(V, ptr, idx, b1, b2, min_rcond, check)
+        if EXTEND_BOUNDARY_ONLY:
+            bad &= on_boundary
         if not bad.any():
             break
         extra[bad] += 1

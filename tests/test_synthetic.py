@@ -39,7 +39,9 @@ def surface() -> tuple[np.ndarray, np.ndarray]:
 
 @pytest.fixture(scope="module")
 def small_parcels() -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray]:
-    return synthetic._brain_parcels(12, mean_faces=500, min_faces=150, max_faces=1500, seed=1)
+    return synthetic._brain_parcels(
+        12, mean_faces=500, min_faces=150, max_faces=1500, seed=1, style="gentle"
+    )
 
 
 def test_surface_is_closed_oriented_genus0(surface):
@@ -72,8 +74,8 @@ def test_face_count_near_target(n_faces):
 
 
 @pytest.mark.parametrize("n_faces", [1000, 8000, 40000])
-def test_triangle_quality(n_faces):
-    V, F = brain_like_surface(n_faces, seed=1)
+def test_gentle_triangle_quality(n_faces):
+    V, F = brain_like_surface(n_faces, style="gentle", seed=1)
     min_angle = _angles(V, F).min(axis=1)
     assert np.percentile(min_angle, 1) >= 20.0
     assert min_angle.min() >= 10.0
@@ -119,6 +121,10 @@ def test_parameters_change_the_folds():
         {"n_faces": 1000, "folding": -1.0},
         {"n_faces": 1000, "frequency": 0.0},
         {"n_faces": 1000, "irregularity": 1.5},
+        {"n_faces": 1000, "style": "wild"},
+        {"n_faces": 1000, "connectivity": "hexagonal"},
+        {"n_faces": 1000, "surface": "inflated"},
+        {"n_faces": 1000, "style": "gentle", "surface": "white"},
     ],
 )
 def test_surface_rejects_bad_arguments(kwargs):
@@ -147,8 +153,8 @@ def test_face_neighbors_match_mesh_face_adjacency(surface):
 @pytest.mark.slow
 def test_folding_adds_area():
     # only on fine meshes: coarse ones lengthen the folds at fixed depth and gain no area
-    V, F = brain_like_surface(100000, seed=3)
-    V0, F0 = brain_like_surface(100000, folding=0.0, seed=3)
+    V, F = brain_like_surface(100000, style="gentle", seed=3)
+    V0, F0 = brain_like_surface(100000, style="gentle", folding=0.0, seed=3)
     ratio = mesh.face_areas(V, F).sum() / mesh.face_areas(V0, F0).sum()
     assert 1.15 < ratio < 1.6
 
@@ -178,9 +184,9 @@ def test_small_parcels_are_disks(small_parcels):
 
 
 def test_parcels_deterministic():
-    a = brain_like_parcels(6, mean_faces=300, min_faces=100, max_faces=900, seed=4)
-    b = brain_like_parcels(6, mean_faces=300, min_faces=100, max_faces=900, seed=4)
-    c = brain_like_parcels(6, mean_faces=300, min_faces=100, max_faces=900, seed=5)
+    a = brain_like_parcels(6, mean_faces=150, min_faces=50, max_faces=450, seed=4)
+    b = brain_like_parcels(6, mean_faces=150, min_faces=50, max_faces=450, seed=4)
+    c = brain_like_parcels(6, mean_faces=150, min_faces=50, max_faces=450, seed=5)
     assert all(
         x[0].tobytes() == y[0].tobytes() and x[1].tobytes() == y[1].tobytes()
         for x, y in zip(a, b, strict=True)
@@ -200,7 +206,7 @@ def test_parcels_reject_bad_bounds():
 @pytest.mark.slow
 def test_atlas_parcels():
     parcels, hot = synthetic._brain_parcels(
-        89, mean_faces=1000, min_faces=300, max_faces=3000, seed=0
+        89, mean_faces=1000, min_faces=300, max_faces=3000, seed=0, style="gentle"
     )
     assert len(parcels) == 89
     sizes = np.array([len(F) for _, F in parcels])
@@ -213,3 +219,174 @@ def test_atlas_parcels():
         B = mesh.boundary_edges(F)
         perimeter = np.linalg.norm(V[B[:, 0]] - V[B[:, 1]], axis=1).sum()
         assert perimeter**2 / (4.0 * np.pi * mesh.face_areas(V, F).sum()) < 6.0
+
+
+def test_surface_statistics_on_convex_and_folded():
+    # a convex closed surface: area equals its hull's, |K| integrates to 4 pi (Gauss-Bonnet)
+    V, F = brain_like_surface(5000, folding=0.0)
+    s = synthetic.surface_statistics(V, F)
+    assert s["faces"] == len(F) and s["vertices"] == len(V)
+    assert s["area_over_hull"] == pytest.approx(1.0, abs=0.01)
+    assert s["abs_curvature"] == pytest.approx(1.0, abs=0.02)
+    assert 0.0 < s["min_angle_p1"] <= s["min_angle_p5"] <= 60.0
+    valence = np.bincount(F.ravel())
+    assert s["valence_std"] == pytest.approx(valence.std())
+    # a saddle-rich fold: negative curvature counts with its absolute value
+    W, G = brain_like_surface(5000, folding=3.0)
+    t = synthetic.surface_statistics(W, G)
+    assert t["abs_curvature"] > 3.0 and t["area_over_hull"] > s["area_over_hull"]
+
+
+# --------------------------------------------------------------------------------------------------
+# the cortex style: as folded as fsaverage5's pial surface (issue 16)
+
+# fsaverage5 left pial surface (nilearn's bundled copy), benchmarks/bench_brains.py
+PIAL_AREA_OVER_HULL = 1.65
+PIAL_ABS_CURVATURE = 69.2
+
+
+def _check_like_pial(V: np.ndarray, F: np.ndarray) -> dict:
+    s = synthetic.surface_statistics(V, F)
+    assert s["area_over_hull"] == pytest.approx(PIAL_AREA_OVER_HULL, rel=0.15)
+    assert s["abs_curvature"] == pytest.approx(PIAL_ABS_CURVATURE, rel=0.15)
+    return s
+
+
+def _direction_flips(V: np.ndarray, F: np.ndarray) -> int:
+    """Triangles whose vertex directions are flipped on the sphere (0: radial graph, embedded)."""
+    U = V / np.linalg.norm(V, axis=1, keepdims=True)
+    n = np.cross(U[F[:, 1]] - U[F[:, 0]], U[F[:, 2]] - U[F[:, 0]])
+    return int(np.sum(np.einsum("ij,ij->i", n, U[F].sum(axis=1)) <= 0.0))
+
+
+@pytest.mark.parametrize("connectivity", ["uniform", "icosahedral"])
+@pytest.mark.parametrize("n_faces", [5000, 20000])
+def test_cortex_is_as_folded_as_real_pial(n_faces, connectivity):
+    V, F = brain_like_surface(n_faces, connectivity=connectivity)
+    s = _check_like_pial(V, F)
+    assert s["min_angle_p1"] > 10.0  # fsaverage5 pial: 13.5
+    assert _direction_flips(V, F) == 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("n_faces", [80000, 320000, 1000000])
+def test_cortex_is_as_folded_as_real_pial_large(n_faces):
+    V, F = brain_like_surface(n_faces)
+    _check_like_pial(V, F)
+    assert _direction_flips(V, F) == 0
+
+
+def test_cortex_default_is_far_more_folded_than_gentle():
+    V, F = brain_like_surface(20000)
+    G, H = brain_like_surface(20000, style="gentle")
+    cortex = synthetic.surface_statistics(V, F)
+    gentle = synthetic.surface_statistics(G, H)
+    assert cortex["abs_curvature"] > 5.0 * gentle["abs_curvature"]
+    assert cortex["area_over_hull"] > gentle["area_over_hull"] + 0.3
+
+
+def test_cortex_has_no_self_intersections():
+    # an independent check of the radial-graph argument: pymeshlab's triangle-triangle tests
+    import pymeshlab
+
+    for connectivity in ("uniform", "icosahedral"):
+        for surface in ("pial", "white"):
+            V, F = brain_like_surface(5000, connectivity=connectivity, surface=surface, seed=2)
+            ms = pymeshlab.MeshSet()
+            ms.add_mesh(pymeshlab.Mesh(V, F))
+            ms.compute_selection_by_self_intersections_per_face()
+            assert ms.current_mesh().selected_face_number() == 0, (connectivity, surface)
+            assert _direction_flips(V, F) == 0
+
+
+def test_cortex_sulci_are_deep_and_narrow():
+    # the groove profile: depth below the smooth ellipsoid along each vertex's ray
+    V, F = brain_like_surface(80000, folding=1.0, seed=0)
+    E, _ = brain_like_surface(80000, folding=0.0, seed=0)
+    U = V / np.linalg.norm(V, axis=1, keepdims=True)
+    r = synthetic._ellipsoid(U)[0]
+    depth = r - np.linalg.norm(V, axis=1)
+    assert depth.max() > 15.0  # primary sulci 17.9 mm deep (plus secondary ones)
+    # steep walls: a sizeable share of the area faces sideways (normal far from the ray)
+    N = mesh.face_normals(V, F)
+    ray = V[F].mean(axis=1)
+    ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+    steep = np.einsum("ij,ij->i", N, ray) < np.cos(np.radians(60.0))
+    area = mesh.face_areas(V, F)
+    assert area[steep].sum() / area.sum() > 0.15
+    assert len(E) == len(V)
+
+
+def test_icosahedral_connectivity_like_a_template():
+    V, F = brain_like_surface(20000, connectivity="icosahedral")
+    assert len(F) == 20480 and len(V) == 10242  # fsaverage5's sizes
+    valence = np.bincount(F.ravel())
+    assert np.sum(valence == 5) == 12 and np.all(valence[valence != 5] == 6)
+    s = synthetic.surface_statistics(V, F)
+    assert s["valence_std"] < 0.05
+    assert 10.0 < s["min_angle_p1"] < 20.0 and 14.0 < s["min_angle_p5"] < 25.0
+
+
+def test_white_pial_pair_share_connectivity():
+    W, V, F = synthetic.brain_like_pair(5000, connectivity="icosahedral", seed=4)
+    V2, F2 = brain_like_surface(5000, connectivity="icosahedral", seed=4)
+    W2, F3 = brain_like_surface(5000, connectivity="icosahedral", surface="white", seed=4)
+    assert V.tobytes() == V2.tobytes() and W.tobytes() == W2.tobytes()
+    assert np.array_equal(F, F2) and np.array_equal(F, F3)
+    # white lies under pial along every vertex ray, by at least the cortical thickness
+    U = V / np.linalg.norm(V, axis=1, keepdims=True)
+    assert np.allclose(W / np.linalg.norm(W, axis=1, keepdims=True), U)
+    gap = np.linalg.norm(V, axis=1) - np.linalg.norm(W, axis=1)
+    assert gap.min() >= synthetic._THICKNESS - 1e-9
+    assert mesh.face_areas(W, F).sum() < mesh.face_areas(V, F).sum()
+    with pytest.raises(InvalidMeshError):
+        synthetic.brain_like_pair(5000, surface="white")
+
+
+@pytest.mark.parametrize("name", ["lh.pial.gii", "lh.pial.surf.gii", "lh.white.gii.gz"])
+def test_gifti_export_loads_back(tmp_path, name):
+    import nibabel as nib
+
+    from segparam.io import load_mesh
+
+    W, V, F = synthetic.brain_like_pair(2000, seed=1)
+    X = W if "white" in name else V
+    path = synthetic.save_gifti(tmp_path / name, X, F)
+    assert path == tmp_path / name and sorted(p.name for p in tmp_path.iterdir()) == [name]
+    image = nib.load(path)
+    intents = [nib.nifti1.intent_codes.label[d.intent] for d in image.darrays]
+    assert intents == ["pointset", "triangle"]
+    assert image.darrays[0].meta["AnatomicalStructurePrimary"] == "CortexLeft"
+    assert image.darrays[0].data.dtype == np.float32 and image.darrays[1].data.dtype == np.int32
+    V2, F2 = load_mesh(path)
+    assert np.array_equal(F2, F)
+    assert np.abs(V2 - X).max() < 1e-4  # float32
+
+
+def test_gifti_export_rejects_bad_arrays(tmp_path):
+    with pytest.raises(InvalidMeshError):
+        synthetic.save_gifti(tmp_path / "x.gii", np.zeros((3, 2)), np.array([[0, 1, 2]]))
+    with pytest.raises(InvalidMeshError):
+        synthetic.save_gifti(tmp_path / "x.gii", np.zeros((3, 3)), np.array([[0, 1, 3]]))
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_cortex_parcels_are_disks_cut_from_folds():
+    parcels = brain_like_parcels(10, mean_faces=460, min_faces=380, max_faces=560, seed=2)
+    assert len(parcels) == 10
+    for V, F in parcels:
+        _check_parcel(V, F)
+        assert 380 <= len(F) <= 560
+    # folded like the cortex: the parcels carry far more |K| than gentle ones of the same size
+    gentle = brain_like_parcels(
+        10, mean_faces=460, min_faces=300, max_faces=700, seed=2, style="gentle"
+    )
+
+    def interior_abs_curvature(V, F):
+        defect = np.abs(mesh.angle_defect(V, F))
+        defect[np.unique(mesh.boundary_edges(F))] = 0.0
+        return defect.sum()
+
+    k = [interior_abs_curvature(V, F) for V, F in parcels]
+    g = [interior_abs_curvature(V, F) for V, F in gentle]
+    assert np.median(k) > 3.0 * np.median(g)
