@@ -8,13 +8,13 @@ import json
 import numpy as np
 import pytest
 import trimesh
+from test_repack import _broken_layout, _known_layout, _similarity
 
 from segparam.cli import main
 from segparam.export import write_obj
 from segparam.io import MeshUV, load_mesh
 from segparam.quality import signed_areas
 from segparam.repack import uv_islands
-from tests.test_repack import _broken_layout, _known_layout, _similarity
 
 
 def test_obj_loader_keeps_vt_through_polygons_and_relative_indices(tmp_path):
