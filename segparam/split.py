@@ -81,6 +81,10 @@ MAX_STRETCH = 1.02
 #: call per piece: on 300 such spheres the target took the stage from 1.5 to 60+ s. The
 #: refinement keeps their stretch instead (:data:`segparam.refine.SMALL_CHART_FACES`).
 STRETCH_MIN_FACES = SMALL_CHART_FACES
+#: ... unless their stretch is past this ceiling: a small chart this stretched is a bad map, not
+#: a curved part that a split would flatten little (the realistic 2k-face brain kept a 58-face
+#: chart at L2 7.6, Linf 70 under the exemption; the small spheres' halves sit at 1.03-1.05).
+SMALL_CHART_MAX_STRETCH = 1.25
 #: Smaller meshes are parameterized in this process: starting workers costs about a second.
 PARALLEL_MIN_FACES = 100_000
 #: A chart is planar when no unit face normal differs from the first by more than this.
@@ -613,13 +617,15 @@ def _given(W: sp.csr_matrix) -> sp.csr_matrix:
 
 def _within_targets(angle, l2, n_faces, cfg: SplitConfig):
     """Whether charts with these angle distortions, L2 stretches and face counts meet the
-    config's targets (``max_distortion``; ``max_stretch`` from ``STRETCH_MIN_FACES`` faces up;
-    a missing target is met)."""
+    config's targets (``max_distortion``; ``max_stretch`` from ``STRETCH_MIN_FACES`` faces up,
+    ``SMALL_CHART_MAX_STRETCH`` below; a missing target is met)."""
     ok = np.ones(np.shape(angle), dtype=bool)
     if cfg.max_distortion is not None:
         ok &= np.asarray(angle) <= cfg.max_distortion
     if cfg.max_stretch is not None:
-        ok &= (np.asarray(l2) <= cfg.max_stretch) | (np.asarray(n_faces) < STRETCH_MIN_FACES)
+        small = np.asarray(n_faces) < STRETCH_MIN_FACES
+        limit = np.where(small, max(cfg.max_stretch, SMALL_CHART_MAX_STRETCH), cfg.max_stretch)
+        ok &= np.asarray(l2) <= limit
     return ok
 
 
