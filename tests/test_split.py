@@ -136,3 +136,20 @@ def test_chart_affinity_is_the_mesh_wide_one_restricted_and_built_on_first_use(m
     assert (W != expected).nnz == 0
     now = affinity.of_chart(faces, now=True)  # what a worker process gets, already restricted
     assert (now() != expected).nnz == 0 and built == [1]  # built once for the mesh
+
+
+def test_small_charts_are_exempt_from_the_stretch_target_only_below_a_ceiling():
+    from segparam.split import (
+        SMALL_CHART_MAX_STRETCH,
+        STRETCH_MIN_FACES,
+        SplitConfig,
+        _within_targets,
+    )
+
+    cfg = SplitConfig(max_stretch=1.02)
+    small, big = STRETCH_MIN_FACES - 1, STRETCH_MIN_FACES
+    l2 = np.array([1.01, 1.1, SMALL_CHART_MAX_STRETCH + 0.01, 1.01, 1.1])
+    faces = np.array([small, small, small, big, big])
+    ok = _within_targets(np.ones(5), l2, faces, cfg)
+    assert ok.tolist() == [True, True, False, True, False]
+    assert _within_targets(np.ones(5), l2, faces, SplitConfig(max_stretch=None)).all()
