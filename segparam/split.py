@@ -94,8 +94,11 @@ PLANAR_TOL = 1e-9
 #: Python and library-call overhead (6.2 s for the 600 hemispheres of 300 small spheres); in a
 #: batch the dense eigenproblem is the cost, and it grows like the cube of the size. Measured per
 #: spherical cap, one BLAS thread, batches of 40: 36 vertices 1.0 ms (alone 10.9), 81: 2.3
-#: (14.3), 144: 3.8 (11.7), 256: 10.1 (15.6, 6.3 of it the batched ``eigh``).
-BATCH_MAX_VERTICES = 256
+#: (14.3), 144: 3.8 (11.7), 256: 10.1 (15.6, 6.3 of it the batched ``eigh``). Up to the dense
+#: solver's limit (400, where a chart alone is dense too): the realistic 20k brain's stage (93
+#: charts, many split pieces of 250-400 vertices) 1.53-1.89 -> 1.31-1.34 s of CPU, fsaverage5
+#: 0.86-0.94 -> 0.79-0.80, the same charts (``parameterize_charts`` timed 3 times each).
+BATCH_MAX_VERTICES = DENSE_LIMIT
 
 
 @dataclass(frozen=True)
