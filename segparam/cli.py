@@ -299,13 +299,16 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
     import time
 
     from .io import (
+        SCENE_SUFFIXES,
         atlas_file_names,
         atlas_stem,
         check_output_folder,
         fit_name,
         load_mesh,
+        load_scene,
         mesh_stem,
         name_max,
+        split_suffix,
     )
     from .pictures import check_bakes
     from .pipeline import build_atlas
@@ -313,6 +316,10 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
     if len(args.input) > 1:
         return _atlas_of_several([Path(p) for p in args.input], args)
     source = Path(args.input[0]) if args.input else _data(DEFAULT_MESH_NAME)
+    if not args.uvs and split_suffix(source)[1] in SCENE_SUFFIXES:
+        meshes = load_scene(source)
+        if len(meshes) > 1:  # a scene of several meshes: one texture, the scene back as one GLB
+            return _atlas_of_several([source], args, loaded=[meshes])
     stem = mesh_stem(source)
     if args.output:
         outdir = Path(args.output)
@@ -365,34 +372,64 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
     return 0
 
 
-def _atlas_of_several(sources: list[Path], args: argparse.Namespace) -> int:
-    """``segparam atlas a.obj b.ply ... -o OUT``: one texture, one texel density, one OBJ and
-    GLB per input, one report (:func:`segparam.pipeline.build_atlases`)."""
+def _atlas_of_several(
+    sources: list[Path], args: argparse.Namespace, *, loaded: list | None = None
+) -> int:
+    """``segparam atlas a.obj b.ply scene.glb ... -o OUT``, or one GLB/glTF scene of several
+    meshes: one texture, one texel density (:func:`segparam.pipeline.build_atlases`); an OBJ
+    per mesh, a GLB per input (a scene's holds its meshes as nodes); the preview, viewer and
+    shared bakes of the whole set; one report. ``loaded``: the inputs' meshes, if read."""
     from .errors import ConfigError
     from .io import (
         all_file_names,
         check_output_folder,
-        load_mesh,
+        fit_name,
+        load_scene,
         mesh_stem,
         multi_atlas_file_names,
+        name_max,
         unique_names,
     )
+    from .pictures import PictureOptions, check_several
     from .pipeline import build_atlases
 
-    if args.uvs:
-        raise ConfigError(f"--uvs repacks one input mesh, got {len(sources)}")
-    if not args.output:
-        raise ConfigError(f"{len(sources)} input meshes make one atlas: name its folder with -o")
-    outdir = Path(args.output)
+    pictures = PictureOptions(
+        preview=not args.no_preview,
+        viewer=not args.no_viewer,
+        bakes=tuple(args.bake or ()),
+        flat=bool(args.flat),  # refused with several meshes; never on by default for them
+    )
+    if len(sources) > 1:  # all before any file is read
+        if args.uvs:
+            raise ConfigError(f"--uvs repacks one input mesh, got {len(sources)}")
+        if not args.output:
+            raise ConfigError(
+                f"{len(sources)} input meshes make one atlas: name its folder with -o"
+            )
+        check_several(pictures, len(sources))
+    if loaded is None:
+        loaded = [load_scene(p) for p in sources]  # every file read before any work
+    meshes = [m for group in loaded for m in group]
+    check_several(pictures, len(meshes))
+    names = unique_names([m.name for m in meshes])
+    scenes, start = [], 0
+    for source, group in zip(sources, loaded, strict=True):  # loop over inputs
+        if len(group) > 1:
+            scenes.append((mesh_stem(source), list(range(start, start + len(group)))))
+        start += len(group)
+    if len(sources) == 1:  # one scene: its files are named after it, as one input's atlas
+        stem = mesh_stem(sources[0])
+        default = fit_name(stem, "_atlas", limit=name_max(Path.cwd()))
+        outdir = Path(args.output or default)
+    else:
+        stem, outdir = "atlas", Path(args.output)
     config = _config_from_args(args)
-    names = unique_names([mesh_stem(p) for p in sources])
-    files = multi_atlas_file_names("atlas", names, outdir)
+    files = multi_atlas_file_names(stem, names, outdir, pictures=pictures, scenes=scenes)
     check_output_folder(outdir, all_file_names(files), inputs=sources)
-    meshes = [load_mesh(p) for p in sources]  # every file read before any work
     bar = _progress_bar(args.quiet)
     try:
         multi = build_atlases(
-            meshes,
+            [(m.V, m.F) for m in meshes],
             config,
             seed=args.seed,
             names=names,
@@ -401,7 +438,7 @@ def _atlas_of_several(sources: list[Path], args: argparse.Namespace) -> int:
     finally:
         if bar:
             bar.close()
-    written = multi.save(outdir, stem="atlas")
+    written = multi.save(outdir, stem=stem, pictures=pictures, scenes=scenes)
     if not args.quiet:
         r = multi.report()["texture"]
         print(
@@ -409,7 +446,8 @@ def _atlas_of_several(sources: list[Path], args: argparse.Namespace) -> int:
             f"{r['resolution']} texture at {r['texels_per_unit']:.4g} texels per unit, "
             f"utilization {r['utilization']:.3f}"
         )
-        for name, atlas, source in zip(names, multi.atlases, sources, strict=True):
+        inputs = [str(s) for s, group in zip(sources, loaded, strict=True) for _ in group]
+        for name, atlas, source in zip(names, multi.atlases, inputs, strict=True):
             print(f"  {name} ({source}): {len(atlas.F)} faces, {atlas.n_charts} charts")
         print(f"  wrote {len(written)} files to {outdir}/")
     return 0
