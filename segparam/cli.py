@@ -530,21 +530,29 @@ def _picture_options(args: argparse.Namespace, source: Path):
     )
 
 
-def add_picture_options(p: argparse.ArgumentParser) -> None:
-    """The options of the atlas folder's pictures (``atlas``)."""
+def add_picture_options(p: argparse.ArgumentParser, *, batch: bool = False) -> None:
+    """The options of the atlas folder's pictures (``atlas``; ``batch``: no ``--flat``, and
+    ``--bake`` takes the built-in names only, data files being per input)."""
     p.add_argument("--no-preview", action="store_true", help="no <stem>_preview.png")
     p.add_argument("--no-viewer", action="store_true", help="no <stem>.html")
-    p.add_argument(
-        "--bake",
-        action="append",
-        metavar="NAME",
-        help="write <stem>_<NAME>.png: curvature, gaussian-curvature, normals, vertex-colors, "
-        "or a per-vertex data file (.func.gii/.shape.gii, lh.thickness, .npy, .csv, .txt); "
-        "repeatable",
-    )
-    p.add_argument(
-        "--flat", action="store_true", help="<stem>_flat.gii and _flatmap.png (on for GIfTI input)"
-    )
+    if batch:
+        bake_help = (
+            "write <stem>_<NAME>.png in every mesh's folder: curvature, gaussian-curvature, "
+            "normals, vertex-colors (no data files: they are per input); repeatable"
+        )
+    else:
+        bake_help = (
+            "write <stem>_<NAME>.png: curvature, gaussian-curvature, normals, vertex-colors, "
+            "or a per-vertex data file (.func.gii/.shape.gii, lh.thickness, .npy, .csv, .txt); "
+            "repeatable; with several meshes curvature, gaussian-curvature, normals only"
+        )
+    p.add_argument("--bake", action="append", metavar="NAME", help=bake_help)
+    if not batch:
+        p.add_argument(
+            "--flat",
+            action="store_true",
+            help="<stem>_flat.gii and _flatmap.png (on for GIfTI input; one mesh only)",
+        )
 
 
 def add_pipeline_options(p: argparse.ArgumentParser) -> None:
@@ -599,6 +607,7 @@ def _add_batch_parser(subparsers: argparse._SubParsersAction) -> argparse.Argume
         "--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://host:8786"
     )
     add_pipeline_options(p)
+    add_picture_options(p, batch=True)
     p.set_defaults(func=_cmd_batch)
     return p
 
@@ -609,7 +618,14 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     Usage errors (no input matched, a bad config, Dask missing) raise :class:`SegparamError`,
     which :func:`main` prints as one line with exit code 2.
     """
-    from .batch import MAX_WORKERS, SUMMARY_FILES, expand_inputs, require_dask, run_batch
+    from .batch import (
+        MAX_WORKERS,
+        SUMMARY_FILES,
+        expand_inputs,
+        picture_settings,
+        require_dask,
+        run_batch,
+    )
     from .io import check_output_folder
 
     if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS:
@@ -617,6 +633,9 @@ def _cmd_batch(args: argparse.Namespace) -> int:
             f"argument --workers: must be from 1 to {MAX_WORKERS}, got {args.workers}"
         )
     config = _config_from_args(args)
+    pictures = picture_settings(
+        preview=not args.no_preview, viewer=not args.no_viewer, bakes=args.bake or ()
+    )
     check_output_folder(args.output, SUMMARY_FILES)  # before Dask starts or any mesh is read
     require_dask()
     # Dask's own INFO chatter (scheduler start, workers retired) is noise on a terminal.
@@ -648,6 +667,7 @@ def _cmd_batch(args: argparse.Namespace) -> int:
             workers=args.workers,
             scheduler=args.scheduler,
             progress=progress,
+            pictures=pictures,
         )
     except KeyboardInterrupt:
         if bar is not None:
