@@ -714,9 +714,10 @@ def build_parser() -> argparse.ArgumentParser:
     atlas = sub.add_parser(
         "atlas",
         help="mesh file(s) -> packed UV atlas (OBJ, GLB, PNGs, report)",
-        description="One mesh: its atlas files. Several meshes: one texture at one texel "
-        "density, an OBJ and a GLB per mesh, one report (use 'segparam batch' for an atlas "
-        "per mesh).",
+        description="One mesh: its atlas files. Several meshes, or a GLB/glTF scene of "
+        "several: one texture at one texel density, an OBJ per mesh, a GLB per input (a "
+        "scene's with its nodes), one preview, viewer and report (use 'segparam batch' for "
+        "an atlas per mesh).",
     )
     atlas.add_argument(
         "input",
