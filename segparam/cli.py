@@ -316,10 +316,12 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
     if len(args.input) > 1:
         return _atlas_of_several([Path(p) for p in args.input], args)
     source = Path(args.input[0]) if args.input else _data(DEFAULT_MESH_NAME)
+    read = None
     if not args.uvs and split_suffix(source)[1] in SCENE_SUFFIXES:
         meshes = load_scene(source)
         if len(meshes) > 1:  # a scene of several meshes: one texture, the scene back as one GLB
             return _atlas_of_several([source], args, loaded=[meshes])
+        read = meshes[0]  # one mesh: as load_mesh reads it
     stem = mesh_stem(source)
     if args.output:
         outdir = Path(args.output)
@@ -333,7 +335,7 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     if args.uvs:
         return _repack_file(source, outdir, stem, config, args)
-    V, F = load_mesh(source)
+    V, F = load_mesh(source) if read is None else (read.V, read.F)
     check_bakes(pictures.bakes, source, V)  # data files of the right length, before the work
     bar = _progress_bar(args.quiet)
     try:

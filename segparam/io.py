@@ -43,6 +43,7 @@ __all__ = [
     "check_output_files",
     "check_output_folder",
     "error_reason",
+    "file_safe",
     "fit_name",
     "json_safe",
     "load_mesh",
@@ -1272,6 +1273,18 @@ def atlas_file_names(stem: str, pictures=None) -> dict[str, str]:
     }
 
 
+# Characters no file name may hold on Linux, macOS or Windows (and control characters).
+_UNSAFE_NAME = re.compile(r'[\x00-\x1f/\\:*?"<>|]')
+
+
+def file_safe(name: str) -> str:
+    """``name`` usable as a file name everywhere: characters that Windows, macOS or Linux refuse
+    (``/ \\ : * ? " < > |``, control characters) become ``_``; an empty name, ``.`` or ``..``
+    (a glTF node may be called anything) becomes ``mesh``."""
+    safe = _UNSAFE_NAME.sub("_", str(name)).strip()
+    return "mesh" if safe in ("", ".", "..") else safe
+
+
 def unique_names(names: list[str]) -> list[str]:
     """``names`` with repeats renamed ``<name>_2``, ``<name>_3``... (case-insensitively, as
     file names on some systems)."""
@@ -1307,8 +1320,8 @@ def multi_atlas_file_names(
     """
     from .pictures import PictureOptions
 
-    names = list(names)
-    scenes = [(str(name), [int(i) for i in meshes]) for name, meshes in scenes]
+    names = unique_names([file_safe(name) for name in names])
+    scenes = [(file_safe(name), [int(i) for i in meshes]) for name, meshes in scenes]
     shared = atlas_file_names(atlas_stem(stem, outdir), pictures or PictureOptions())
     limit = name_max(outdir) - len(".obj")
     meshes = [fit_name(name, limit=limit) for name in names]

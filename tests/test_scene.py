@@ -214,3 +214,16 @@ def test_cli_scene_refuses_flat_before_any_work(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "got 2 meshes" in err
     assert not out.exists()
+
+
+def test_node_names_that_are_no_file_names(tmp_path):
+    (V1, F1), (V2, F2) = _meshes()
+    scene = trimesh.Scene()
+    scene.add_geometry(trimesh.Trimesh(V1, F1, process=False), node_name="left/arm", geom_name="a")
+    scene.add_geometry(trimesh.Trimesh(V2, F2, process=False), node_name="..", geom_name="b")
+    scene.export(tmp_path / "body.glb")
+    out = tmp_path / "out"
+    args = ["atlas", str(tmp_path / "body.glb"), "-o", str(out), "--no-preview", "--no-viewer"]
+    assert main([*args, *FAST]) == 0
+    assert {"left_arm.obj", "mesh.obj", "body.glb"} <= {p.name for p in out.iterdir()}
+    assert [n["name"] for n in _glb_json(out / "body.glb")["nodes"]] == ["left/arm", ".."]
