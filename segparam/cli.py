@@ -316,12 +316,6 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
     if len(args.input) > 1:
         return _atlas_of_several([Path(p) for p in args.input], args)
     source = Path(args.input[0]) if args.input else _data(DEFAULT_MESH_NAME)
-    read = None
-    if not args.uvs and split_suffix(source)[1] in SCENE_SUFFIXES:
-        meshes = load_scene(source)
-        if len(meshes) > 1:  # a scene of several meshes: one texture, the scene back as one GLB
-            return _atlas_of_several([source], args, loaded=[meshes])
-        read = meshes[0]  # one mesh: as load_mesh reads it
     stem = mesh_stem(source)
     if args.output:
         outdir = Path(args.output)
@@ -335,6 +329,12 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     if args.uvs:
         return _repack_file(source, outdir, stem, config, args)
+    read = None
+    if split_suffix(source)[1] in SCENE_SUFFIXES:
+        meshes = load_scene(source)
+        if len(meshes) > 1:  # a scene of several meshes: one texture, the scene back as one GLB
+            return _atlas_of_several([source], args, loaded=[meshes])
+        read = meshes[0]  # one mesh: as load_mesh reads it
     V, F = load_mesh(source) if read is None else (read.V, read.F)
     check_bakes(pictures.bakes, source, V)  # data files of the right length, before the work
     bar = _progress_bar(args.quiet)
@@ -410,7 +410,13 @@ def _atlas_of_several(
             )
         check_several(pictures, len(sources))
     if loaded is None:
-        loaded = [load_scene(p) for p in sources]  # every file read before any work
+        # the folder checked before any file is read (with the names of one mesh per input;
+        # a scene's own names are checked once it is read), then every file read before work
+        plain = multi_atlas_file_names(
+            "atlas", [mesh_stem(p) for p in sources], Path(args.output), pictures=pictures
+        )
+        check_output_folder(args.output, all_file_names(plain), inputs=sources)
+        loaded = [load_scene(p) for p in sources]
     meshes = [m for group in loaded for m in group]
     check_several(pictures, len(meshes))
     names = unique_names([m.name for m in meshes])

@@ -227,3 +227,22 @@ def test_node_names_that_are_no_file_names(tmp_path):
     assert main([*args, *FAST]) == 0
     assert {"left_arm.obj", "mesh.obj", "body.glb"} <= {p.name for p in out.iterdir()}
     assert [n["name"] for n in _glb_json(out / "body.glb")["nodes"]] == ["left/arm", ".."]
+
+
+def test_several_inputs_output_checked_before_any_file_is_read(tmp_path, capsys, monkeypatch):
+    import segparam.io
+
+    V, F = _meshes()[0]
+    write_obj(tmp_path / "a.obj", V, F)
+    _scene_file(tmp_path / "scene.glb")
+
+    def read(*args, **kwargs):
+        raise AssertionError("a file was read before the output folder was checked")
+
+    monkeypatch.setattr(segparam.io, "load_mesh", read)
+    monkeypatch.setattr(segparam.io, "load_scene", read)
+    sources = [str(tmp_path / "a.obj"), str(tmp_path / "scene.glb")]
+    # into the inputs' folder: a.obj and scene.glb would be overwritten
+    assert main(["atlas", *sources, "-o", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "would overwrite this input" in err
