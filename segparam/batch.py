@@ -3,7 +3,8 @@
 :func:`run_batch` expands the inputs (files, folders, glob patterns), skips the meshes whose output
 folder already holds an atlas made with the same settings, submits one :func:`process_one` task per
 remaining mesh and gathers the results as they finish. Each mesh writes ``OUTDIR/<stem>/`` exactly
-as ``segparam atlas`` does; ``OUTDIR/summary.csv`` and ``OUTDIR/summary.json`` list every input.
+as ``segparam atlas`` does (the pictures of :func:`picture_settings`, built-in bakes only);
+``OUTDIR/summary.csv`` and ``OUTDIR/summary.json`` list every input.
 
 Dask (``dask[distributed]``) is an optional dependency (``pip install 'segparam[batch]'``); it is
 imported only when a batch runs. Workers need segparam installed and must see the input and output
@@ -40,6 +41,7 @@ __all__ = [
     "assign_folders",
     "expand_inputs",
     "fingerprint",
+    "picture_settings",
     "process_one",
     "require_dask",
     "run_batch",
@@ -195,13 +197,20 @@ def _file_sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def fingerprint(input_sha256: str, config_dict: dict[str, Any], seed: int) -> str:
-    """sha256 of everything that determines an atlas: input bytes, settings, seed, version."""
+def fingerprint(
+    input_sha256: str,
+    config_dict: dict[str, Any],
+    seed: int,
+    pictures: dict[str, Any] | None = None,
+) -> str:
+    """sha256 of everything that determines an atlas folder: input bytes, settings, seed,
+    version, and the pictures asked for (:func:`picture_settings`)."""
     key = {
         "input_sha256": input_sha256,
         "settings": config_dict,
         "seed": int(seed),
         "segparam": __version__,
+        "pictures": picture_settings(**(pictures or {})),
     }
     return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()
 
@@ -214,13 +223,15 @@ def _read_marker(folder: Path) -> dict[str, Any] | None:
     return data if isinstance(data, dict) else None
 
 
-def _done_row(path: Path, folder: Path, config_dict: dict, seed: int) -> dict[str, Any] | None:
+def _done_row(
+    path: Path, folder: Path, config_dict: dict, seed: int, pictures: dict | None = None
+) -> dict[str, Any] | None:
     """The ``skipped`` row of a mesh whose folder holds an atlas of these settings, else None."""
     marker = _read_marker(folder)
     if marker is None:
         return None
     try:
-        fp = fingerprint(_file_sha256(path), config_dict, seed)
+        fp = fingerprint(_file_sha256(path), config_dict, seed, pictures)
     except OSError:
         return None  # unreadable input: let the task report why
     if marker.get("fingerprint") != fp:
@@ -239,8 +250,46 @@ def _one_line(exc: BaseException) -> str:
     return " ".join(text.split()) or type(exc).__name__
 
 
+def picture_settings(
+    preview: bool = True, viewer: bool = True, bakes: Iterable[str] = ()
+) -> dict[str, Any]:
+    """The pictures of every mesh's folder, checked: ``{"preview", "viewer", "bakes"}``.
+
+    Bakes are the built-in names only (:data:`segparam.bake.BAKE_NAMES`: ``curvature``,
+    ``normals``, ...): a per-vertex data file belongs to one input, and its length could only
+    be checked against one mesh. The flat map follows the input, as in ``segparam atlas``
+    (on for GIfTI surfaces).
+
+    Raises
+    ------
+    BakeError
+        A data file, or two bakes of the same file name; one line, before any work.
+    """
+    from .bake import BAKE_NAMES, BakeError, bake_label
+
+    bakes = [str(b) for b in bakes]
+    labels: dict[str, str] = {}
+    for name in bakes:
+        if name not in BAKE_NAMES:
+            raise BakeError(
+                f"--bake {name}: a data file belongs to one input; segparam batch bakes "
+                f"{', '.join(BAKE_NAMES)}"
+            )
+        label = bake_label(name)
+        if label in labels:
+            raise BakeError(
+                f"--bake {name} and --bake {labels[label]} would both write _{label}.png"
+            )
+        labels[label] = name
+    return {"preview": bool(preview), "viewer": bool(viewer), "bakes": bakes}
+
+
 def process_one(
-    path: str | os.PathLike, outdir: str | os.PathLike, config_dict: dict[str, Any], seed: int
+    path: str | os.PathLike,
+    outdir: str | os.PathLike,
+    config_dict: dict[str, Any],
+    seed: int,
+    pictures: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Make the atlas of one mesh file into ``outdir`` (the Dask task; never raises on a bad mesh).
 
@@ -257,6 +306,8 @@ def process_one(
     config_dict : dict
         :meth:`PipelineConfig.as_dict` of the settings.
     seed : int
+    pictures : dict, optional
+        The keywords of :func:`picture_settings` (default: preview and viewer, no bakes).
 
     Returns
     -------
@@ -272,16 +323,25 @@ def process_one(
         load_mesh,
         mesh_stem,
     )
+    from .pictures import PictureOptions, check_bakes, flat_default
     from .pipeline import build_atlas, config_from_dict
 
     path, folder = Path(path), Path(outdir)
     t0 = time.perf_counter()
     try:
-        skipped = _done_row(path, folder, config_dict, seed)
+        settings = picture_settings(**(pictures or {}))
+        skipped = _done_row(path, folder, config_dict, seed, settings)
         if skipped is not None:
             return skipped
+        options = PictureOptions(
+            preview=settings["preview"],
+            viewer=settings["viewer"],
+            bakes=tuple(settings["bakes"]),
+            flat=flat_default(path),
+            input_path=str(path),
+        )
         stem = atlas_stem(mesh_stem(path), folder)
-        names = [*atlas_file_names(stem).values(), DONE_MARKER]
+        names = [*atlas_file_names(stem, options).values(), DONE_MARKER]
         check_output_folder(folder, names, inputs=[path])  # before any work
         # One task per mesh already keeps every worker busy: no process pool inside a task.
         config = config_from_dict(config_dict).replace(split={"n_jobs": 1})
@@ -290,9 +350,10 @@ def process_one(
         except OSError:
             input_sha = None  # load_mesh below says what is wrong with the file
         V, F = load_mesh(path)
+        check_bakes(options.bakes, path, V)  # vertex-colors: this input has them, before work
         atlas = build_atlas(V, F, config, seed=seed)
         (folder / DONE_MARKER).unlink(missing_ok=True)  # an older atlas is being replaced
-        atlas.save(folder, stem=stem)
+        atlas.save(folder, stem=stem, pictures=options)
         report = json.loads((folder / "report.json").read_text(encoding="utf-8"))["atlas"]
         result = {
             "seconds": round(time.perf_counter() - t0, 3),
@@ -302,12 +363,13 @@ def process_one(
             "l2_stretch": report["l2_stretch"],
         }
         marker = {
-            "fingerprint": fingerprint(input_sha, config_dict, seed),
+            "fingerprint": fingerprint(input_sha, config_dict, seed, settings),
             "input": str(path),
             "input_sha256": input_sha,
             "seed": int(seed),
             "segparam": __version__,
             "settings": config_dict,
+            "pictures": settings,
             "result": result,
         }
         with atomic_path(folder / DONE_MARKER) as tmp:
@@ -396,6 +458,7 @@ def run_batch(
     client: Any = None,
     progress: Callable[[dict[str, Any]], None] | None = None,
     summary_interval: float = 2.0,
+    pictures: dict[str, Any] | None = None,
 ) -> BatchResult:
     """Make the atlas of every mesh in ``inputs`` on Dask, one task per mesh.
 
@@ -419,6 +482,9 @@ def run_batch(
         ``progress(row)`` once per input as it is skipped or finishes.
     summary_interval : float
         Least seconds between rewrites of the summaries while meshes finish.
+    pictures : dict, optional
+        The keywords of :func:`picture_settings`: ``preview``, ``viewer`` (default True) and
+        ``bakes`` (built-in names; default none).
 
     Returns
     -------
@@ -427,7 +493,8 @@ def run_batch(
     Raises
     ------
     SegparamError
-        Dask is missing, or no input matched (:class:`MeshFileError`).
+        Dask is missing, no input matched (:class:`MeshFileError`), or a bake is a data file
+        (:class:`~segparam.bake.BakeError`).
     KeyboardInterrupt
         After cancelling the tasks, closing the cluster and writing the summaries.
     """
@@ -435,6 +502,7 @@ def run_batch(
     from .pipeline import PipelineConfig, check_seed
 
     seed = check_seed(seed)
+    pictures = picture_settings(**(pictures or {}))
     outdir = Path(outdir).expanduser().resolve()
     check_output_folder(outdir, SUMMARY_FILES)  # writable, not a file: before any work
     distributed = require_dask()
@@ -444,12 +512,17 @@ def run_batch(
     folders = [outdir / name for name in assign_folders(paths, limit=name_max(outdir))]
     config_dict = config.as_dict()
     report = progress or (lambda row: None)
-    meta = {"segparam": __version__, "seed": int(seed), "settings": config_dict}
+    meta = {
+        "segparam": __version__,
+        "seed": int(seed),
+        "settings": config_dict,
+        "pictures": pictures,
+    }
 
     rows = [_row(p, f, status="pending") for p, f in zip(paths, folders, strict=True)]
     todo = []
     for k, (path, folder) in enumerate(zip(paths, folders, strict=True)):
-        done = _done_row(path, folder, config_dict, seed)
+        done = _done_row(path, folder, config_dict, seed, pictures)
         if done is None:
             todo.append(k)
         else:
@@ -479,7 +552,13 @@ def run_batch(
                 log.info("dask dashboard: %s", client.dashboard_link)
             for k in todo:
                 future = client.submit(
-                    process_one, str(paths[k]), str(folders[k]), config_dict, seed, pure=False
+                    process_one,
+                    str(paths[k]),
+                    str(folders[k]),
+                    config_dict,
+                    seed,
+                    pictures,
+                    pure=False,
                 )
                 futures[future] = k
             last_write = time.monotonic()

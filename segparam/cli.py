@@ -299,13 +299,16 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
     import time
 
     from .io import (
+        SCENE_SUFFIXES,
         atlas_file_names,
         atlas_stem,
         check_output_folder,
         fit_name,
         load_mesh,
+        load_scene,
         mesh_stem,
         name_max,
+        split_suffix,
     )
     from .pictures import check_bakes
     from .pipeline import build_atlas
@@ -326,7 +329,13 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     if args.uvs:
         return _repack_file(source, outdir, stem, config, args)
-    V, F = load_mesh(source)
+    read = None
+    if split_suffix(source)[1] in SCENE_SUFFIXES:
+        meshes = load_scene(source)
+        if len(meshes) > 1:  # a scene of several meshes: one texture, the scene back as one GLB
+            return _atlas_of_several([source], args, loaded=[meshes])
+        read = meshes[0]  # one mesh: as load_mesh reads it
+    V, F = load_mesh(source) if read is None else (read.V, read.F)
     check_bakes(pictures.bakes, source, V)  # data files of the right length, before the work
     bar = _progress_bar(args.quiet)
     try:
@@ -365,34 +374,70 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
     return 0
 
 
-def _atlas_of_several(sources: list[Path], args: argparse.Namespace) -> int:
-    """``segparam atlas a.obj b.ply ... -o OUT``: one texture, one texel density, one OBJ and
-    GLB per input, one report (:func:`segparam.pipeline.build_atlases`)."""
+def _atlas_of_several(
+    sources: list[Path], args: argparse.Namespace, *, loaded: list | None = None
+) -> int:
+    """``segparam atlas a.obj b.ply scene.glb ... -o OUT``, or one GLB/glTF scene of several
+    meshes: one texture, one texel density (:func:`segparam.pipeline.build_atlases`); an OBJ
+    per mesh, a GLB per input (a scene's holds its meshes as nodes); the preview, viewer and
+    shared bakes of the whole set; one report. ``loaded``: the inputs' meshes, if read."""
     from .errors import ConfigError
     from .io import (
         all_file_names,
         check_output_folder,
-        load_mesh,
+        fit_name,
+        load_scene,
         mesh_stem,
         multi_atlas_file_names,
+        name_max,
         unique_names,
     )
+    from .pictures import PictureOptions, check_several
     from .pipeline import build_atlases
 
-    if args.uvs:
-        raise ConfigError(f"--uvs repacks one input mesh, got {len(sources)}")
-    if not args.output:
-        raise ConfigError(f"{len(sources)} input meshes make one atlas: name its folder with -o")
-    outdir = Path(args.output)
+    pictures = PictureOptions(
+        preview=not args.no_preview,
+        viewer=not args.no_viewer,
+        bakes=tuple(args.bake or ()),
+        flat=bool(args.flat),  # refused with several meshes; never on by default for them
+    )
+    if len(sources) > 1:  # all before any file is read
+        if args.uvs:
+            raise ConfigError(f"--uvs repacks one input mesh, got {len(sources)}")
+        if not args.output:
+            raise ConfigError(
+                f"{len(sources)} input meshes make one atlas: name its folder with -o"
+            )
+        check_several(pictures, len(sources))
+    if loaded is None:
+        # the folder checked before any file is read (with the names of one mesh per input;
+        # a scene's own names are checked once it is read), then every file read before work
+        plain = multi_atlas_file_names(
+            "atlas", [mesh_stem(p) for p in sources], Path(args.output), pictures=pictures
+        )
+        check_output_folder(args.output, all_file_names(plain), inputs=sources)
+        loaded = [load_scene(p) for p in sources]
+    meshes = [m for group in loaded for m in group]
+    check_several(pictures, len(meshes))
+    names = unique_names([m.name for m in meshes])
+    scenes, start = [], 0
+    for source, group in zip(sources, loaded, strict=True):  # loop over inputs
+        if len(group) > 1:
+            scenes.append((mesh_stem(source), list(range(start, start + len(group)))))
+        start += len(group)
+    if len(sources) == 1:  # one scene: its files are named after it, as one input's atlas
+        stem = mesh_stem(sources[0])
+        default = fit_name(stem, "_atlas", limit=name_max(Path.cwd()))
+        outdir = Path(args.output or default)
+    else:
+        stem, outdir = "atlas", Path(args.output)
     config = _config_from_args(args)
-    names = unique_names([mesh_stem(p) for p in sources])
-    files = multi_atlas_file_names("atlas", names, outdir)
+    files = multi_atlas_file_names(stem, names, outdir, pictures=pictures, scenes=scenes)
     check_output_folder(outdir, all_file_names(files), inputs=sources)
-    meshes = [load_mesh(p) for p in sources]  # every file read before any work
     bar = _progress_bar(args.quiet)
     try:
         multi = build_atlases(
-            meshes,
+            [(m.V, m.F) for m in meshes],
             config,
             seed=args.seed,
             names=names,
@@ -401,7 +446,7 @@ def _atlas_of_several(sources: list[Path], args: argparse.Namespace) -> int:
     finally:
         if bar:
             bar.close()
-    written = multi.save(outdir, stem="atlas")
+    written = multi.save(outdir, stem=stem, pictures=pictures, scenes=scenes)
     if not args.quiet:
         r = multi.report()["texture"]
         print(
@@ -409,7 +454,8 @@ def _atlas_of_several(sources: list[Path], args: argparse.Namespace) -> int:
             f"{r['resolution']} texture at {r['texels_per_unit']:.4g} texels per unit, "
             f"utilization {r['utilization']:.3f}"
         )
-        for name, atlas, source in zip(names, multi.atlases, sources, strict=True):
+        inputs = [str(s) for s, group in zip(sources, loaded, strict=True) for _ in group]
+        for name, atlas, source in zip(names, multi.atlases, inputs, strict=True):
             print(f"  {name} ({source}): {len(atlas.F)} faces, {atlas.n_charts} charts")
         print(f"  wrote {len(written)} files to {outdir}/")
     return 0
@@ -492,21 +538,29 @@ def _picture_options(args: argparse.Namespace, source: Path):
     )
 
 
-def add_picture_options(p: argparse.ArgumentParser) -> None:
-    """The options of the atlas folder's pictures (``atlas``)."""
+def add_picture_options(p: argparse.ArgumentParser, *, batch: bool = False) -> None:
+    """The options of the atlas folder's pictures (``atlas``; ``batch``: no ``--flat``, and
+    ``--bake`` takes the built-in names only, data files being per input)."""
     p.add_argument("--no-preview", action="store_true", help="no <stem>_preview.png")
     p.add_argument("--no-viewer", action="store_true", help="no <stem>.html")
-    p.add_argument(
-        "--bake",
-        action="append",
-        metavar="NAME",
-        help="write <stem>_<NAME>.png: curvature, gaussian-curvature, normals, vertex-colors, "
-        "or a per-vertex data file (.func.gii/.shape.gii, lh.thickness, .npy, .csv, .txt); "
-        "repeatable",
-    )
-    p.add_argument(
-        "--flat", action="store_true", help="<stem>_flat.gii and _flatmap.png (on for GIfTI input)"
-    )
+    if batch:
+        bake_help = (
+            "write <stem>_<NAME>.png in every mesh's folder: curvature, gaussian-curvature, "
+            "normals, vertex-colors (no data files: they are per input); repeatable"
+        )
+    else:
+        bake_help = (
+            "write <stem>_<NAME>.png: curvature, gaussian-curvature, normals, vertex-colors, "
+            "or a per-vertex data file (.func.gii/.shape.gii, lh.thickness, .npy, .csv, .txt); "
+            "repeatable; with several meshes curvature, gaussian-curvature, normals only"
+        )
+    p.add_argument("--bake", action="append", metavar="NAME", help=bake_help)
+    if not batch:
+        p.add_argument(
+            "--flat",
+            action="store_true",
+            help="<stem>_flat.gii and _flatmap.png (on for GIfTI input; one mesh only)",
+        )
 
 
 def add_pipeline_options(p: argparse.ArgumentParser) -> None:
@@ -561,6 +615,7 @@ def _add_batch_parser(subparsers: argparse._SubParsersAction) -> argparse.Argume
         "--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://host:8786"
     )
     add_pipeline_options(p)
+    add_picture_options(p, batch=True)
     p.set_defaults(func=_cmd_batch)
     return p
 
@@ -571,7 +626,14 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     Usage errors (no input matched, a bad config, Dask missing) raise :class:`SegparamError`,
     which :func:`main` prints as one line with exit code 2.
     """
-    from .batch import MAX_WORKERS, SUMMARY_FILES, expand_inputs, require_dask, run_batch
+    from .batch import (
+        MAX_WORKERS,
+        SUMMARY_FILES,
+        expand_inputs,
+        picture_settings,
+        require_dask,
+        run_batch,
+    )
     from .io import check_output_folder
 
     if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS:
@@ -579,6 +641,9 @@ def _cmd_batch(args: argparse.Namespace) -> int:
             f"argument --workers: must be from 1 to {MAX_WORKERS}, got {args.workers}"
         )
     config = _config_from_args(args)
+    pictures = picture_settings(
+        preview=not args.no_preview, viewer=not args.no_viewer, bakes=args.bake or ()
+    )
     check_output_folder(args.output, SUMMARY_FILES)  # before Dask starts or any mesh is read
     require_dask()
     # Dask's own INFO chatter (scheduler start, workers retired) is noise on a terminal.
@@ -610,6 +675,7 @@ def _cmd_batch(args: argparse.Namespace) -> int:
             workers=args.workers,
             scheduler=args.scheduler,
             progress=progress,
+            pictures=pictures,
         )
     except KeyboardInterrupt:
         if bar is not None:
@@ -656,9 +722,10 @@ def build_parser() -> argparse.ArgumentParser:
     atlas = sub.add_parser(
         "atlas",
         help="mesh file(s) -> packed UV atlas (OBJ, GLB, PNGs, report)",
-        description="One mesh: its atlas files. Several meshes: one texture at one texel "
-        "density, an OBJ and a GLB per mesh, one report (use 'segparam batch' for an atlas "
-        "per mesh).",
+        description="One mesh: its atlas files. Several meshes, or a GLB/glTF scene of "
+        "several: one texture at one texel density, an OBJ per mesh, a GLB per input (a "
+        "scene's with its nodes), one preview, viewer and report (use 'segparam batch' for "
+        "an atlas per mesh).",
     )
     atlas.add_argument(
         "input",

@@ -13,6 +13,7 @@ from __future__ import annotations
 import functools
 import os
 import struct
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -297,7 +298,7 @@ def save_atlas(
     if not stem or stem in (".", "..") or "/" in stem or os.sep in stem:
         raise MeshFileError(f"stem {stem!r} is not a file name")
     stem = atlas_stem(stem, outdir)
-    from .pictures import PictureOptions, make_pictures
+    from .pictures import PictureOptions
 
     pictures = PictureOptions() if pictures is None else pictures
     names = atlas_file_names(stem, pictures)
@@ -305,15 +306,9 @@ def save_atlas(
     size = size or atlas.packing.resolution
     try:
         # the pictures are made before anything is written: a failure leaves no file
-        layout = render_uv_layout(atlas.uv, atlas.uv_F, labels=atlas.chart_of_face, size=size)
-        uv_png = _png_bytes(np.asarray(layout))
-        extra, pictures_info = make_pictures(
-            atlas, stem, pictures, checker_png=_checker_png(1024), uv_png=uv_png
-        )
+        uv_png, extra, pictures_info, seconds = _picture_files(atlas, stem, pictures, size)
         report = atlas.report()
-        seconds = pictures_info.pop("seconds")
-        timings = {**report.get("timings", {}), **{f"picture {k}": v for k, v in seconds.items()}}
-        report["timings"] = timings
+        report["timings"] = {**report.get("timings", {}), **seconds}
         report["pictures"] = pictures_info
         with staged_outputs(outdir) as stage:
             checker = _checker_png(1024)
@@ -349,11 +344,41 @@ def save_atlas(
     return [outdir / name for name in names.values()]
 
 
-def save_atlases(multi, outdir: str | os.PathLike, *, stem: str = "atlas") -> list[Path]:
+def _picture_files(atlas, stem: str, pictures, size: int):
+    """The uv-layout PNG and the pictures of ``pictures`` for ``atlas`` (an :class:`Atlas` or
+    the :class:`~segparam.pictures.MeshSet` of several): ``(uv png bytes, {file name: bytes},
+    the report's pictures section, {"picture <name>": seconds})``. One function for
+    :func:`save_atlas` and :func:`save_atlases`."""
+    from .pictures import make_pictures
+
+    layout = render_uv_layout(atlas.uv, atlas.uv_F, labels=atlas.chart_of_face, size=size)
+    uv_png = _png_bytes(np.asarray(layout))
+    extra, info = make_pictures(
+        atlas, stem, pictures, checker_png=_checker_png(1024), uv_png=uv_png
+    )
+    seconds = {f"picture {k}": v for k, v in info.pop("seconds").items()}
+    return uv_png, extra, info, seconds
+
+
+def save_atlases(
+    multi,
+    outdir: str | os.PathLike,
+    *,
+    stem: str = "atlas",
+    pictures=None,
+    scenes: Sequence[tuple[str, Sequence[int]]] = (),
+) -> list[Path]:
     """Write a :class:`~segparam.pipeline.MultiAtlas` (several meshes, one texture) into
-    ``outdir``: per mesh ``<name>.obj`` and ``<name>.glb``; shared by all, ``<stem>.mtl``
-    (every OBJ's material), ``<stem>_checker.png``, ``<stem>_uv.png`` (the layout of every
-    chart of every mesh) and ``report.json`` (:meth:`MultiAtlas.report`, a section per mesh).
+    ``outdir``.
+
+    Per mesh ``<name>.obj`` and ``<name>.glb``; per scene of ``scenes`` (``(scene name, mesh
+    indices)``, e.g. the meshes of one GLB input) one ``<scene name>.glb`` holding those meshes
+    as named nodes, instead of their own GLBs; shared by all, ``<stem>.mtl`` (every OBJ's
+    material), ``<stem>_checker.png`` (every GLB's texture), ``<stem>_uv.png`` (the layout of
+    every chart of every mesh), the pictures of ``pictures`` of the whole set (a
+    :class:`~segparam.pictures.PictureOptions`; default ``<stem>_preview.png`` and
+    ``<stem>.html``; bakes are :data:`~segparam.pictures.SHARED_BAKES` only, no flat map) and
+    ``report.json`` (:meth:`MultiAtlas.report`, a section per mesh, and ``pictures``).
 
     Checked first and written all or nothing as :func:`save_atlas`.
 
@@ -364,20 +389,25 @@ def save_atlases(multi, outdir: str | os.PathLike, *, stem: str = "atlas") -> li
     """
     import json
 
+    from .pictures import PictureOptions, check_several, merge_atlases
+
     outdir = Path(outdir)
-    names = multi_atlas_file_names(str(stem), multi.names, outdir)
+    pictures = PictureOptions() if pictures is None else pictures
+    atlases = multi.atlases
+    check_several(pictures, len(atlases))
+    names = multi_atlas_file_names(str(stem), multi.names, outdir, pictures=pictures, scenes=scenes)
     files = all_file_names(names)
     check_output_folder(outdir, files)
-    atlases = multi.atlases
-    # one layout picture: every mesh's uv rows one after another, charts numbered on
-    rows = np.cumsum([0] + [len(a.uv) for a in atlases])
-    charts = np.cumsum([0] + [a.n_charts for a in atlases])
-    uv = np.concatenate([a.uv for a in atlases])
-    uv_F = np.concatenate([a.uv_F + r for a, r in zip(atlases, rows[:-1], strict=True)])
-    labels = np.concatenate(
-        [a.chart_of_face + c for a, c in zip(atlases, charts[:-1], strict=True)]
-    )
+    shared_stem = Path(names["mtl"]).stem
     try:
+        # the pictures of the whole set, from the code of one atlas, before anything is written
+        merged = merge_atlases(atlases, multi.packing)
+        uv_png, extra, pictures_info, seconds = _picture_files(
+            merged, shared_stem, pictures, multi.packing.resolution
+        )
+        report = multi.report()
+        report["pictures"] = pictures_info
+        report["timings"] = seconds
         with staged_outputs(outdir) as stage:
             checker = _checker_png(1024)
             (stage / names["checker"]).write_bytes(checker)
@@ -395,13 +425,26 @@ def save_atlases(multi, outdir: str | os.PathLike, *, stem: str = "atlas") -> li
                     uv_faces=atlas.uv_F,
                     mtl=names["mtl"],
                 )
-                (stage / files_of["glb"]).write_bytes(
-                    _glb_bytes(atlas.V[atlas.uv_vertex], atlas.uv_F, atlas.uv, checker)
-                )
-            layout = render_uv_layout(uv, uv_F, labels=labels, size=multi.packing.resolution)
-            layout.save(stage / names["uv"], format="PNG")
+                if "glb" in files_of:
+                    (stage / files_of["glb"]).write_bytes(
+                        _glb_bytes(atlas.V[atlas.uv_vertex], atlas.uv_F, atlas.uv, checker)
+                    )
+            for scene in names["scenes"]:  # one GLB per scene, a node per mesh
+                parts = [
+                    (
+                        multi.names[i],
+                        atlases[i].V[atlases[i].uv_vertex],
+                        atlases[i].uv_F,
+                        atlases[i].uv,
+                    )
+                    for i in scene["meshes"]
+                ]
+                (stage / scene["glb"]).write_bytes(_glb_scene_bytes(parts, checker))
+            (stage / names["uv"]).write_bytes(uv_png)
+            for name, data in extra.items():
+                (stage / name).write_bytes(data)
             (stage / names["report"]).write_text(
-                json.dumps(multi.report(), indent=1, sort_keys=False) + "\n", encoding="utf-8"
+                json.dumps(report, indent=1, sort_keys=False) + "\n", encoding="utf-8"
             )
     except MeshFileError:
         raise
@@ -437,15 +480,8 @@ _GLB_MATERIAL = {
 
 
 def _glb_bytes(V: np.ndarray, F: np.ndarray, uv: np.ndarray, png: bytes) -> bytes:
-    """A binary glTF 2.0 of a textured triangle mesh that keeps float64 placement.
-
-    One scene, one node, one mesh with one triangle primitive: ``POSITION`` (float32),
-    ``TEXCOORD_0`` (float32, ``v`` flipped: glTF's uv origin is the top-left corner) and uint32
-    indices, and a material whose base colour is the PNG ``png``, embedded. An object far from
-    the origin (1e7 away, say) would lose up to half a unit to float32 positions: its positions
-    are written relative to its bounding-box centre and the node carries the centre as its
-    ``translation``, which glTF keeps as a JSON (double) number. The same input gives the same
-    bytes.
+    """A binary glTF 2.0 of one textured triangle mesh (:func:`_glb_scene_bytes` with one
+    unnamed part).
 
     Parameters
     ----------
@@ -458,28 +494,83 @@ def _glb_bytes(V: np.ndarray, F: np.ndarray, uv: np.ndarray, png: bytes) -> byte
     png : bytes
         The texture, a PNG file.
     """
+    return _glb_scene_bytes([(None, V, F, uv)], png)
+
+
+def _glb_scene_bytes(parts, png: bytes) -> bytes:
+    """A binary glTF 2.0 scene of textured triangle meshes sharing one texture, keeping float64
+    placement.
+
+    One scene; per part ``(name, V, F, uv)`` one node (named ``name`` unless None) and one mesh
+    with one triangle primitive: ``POSITION`` (float32), ``TEXCOORD_0`` (float32, ``v``
+    flipped: glTF's uv origin is the top-left corner) and uint32 indices. Every primitive uses
+    the one material, whose base colour is the PNG ``png``, embedded once. A part far from the
+    origin (1e7 away, say) would lose up to half a unit to float32 positions: its positions are
+    written relative to its bounding-box centre and its node carries the centre as its
+    ``translation``, which glTF keeps as a JSON (double) number. The same input gives the same
+    bytes.
+
+    Parameters
+    ----------
+    parts : sequence of (str or None, (n, 3) float, (m, 3) int, (n, 2) float)
+        Per mesh: node name, one position per uv vertex, triangles into both, and texture
+        coordinates with the origin bottom-left (as in OBJ).
+    png : bytes
+        The texture, a PNG file.
+    """
     import json
 
     from . import __version__
 
-    V = np.asarray(V, dtype=np.float64)
-    uv = np.asarray(uv, dtype=np.float64)
-    if len(uv) != len(V):
-        raise ValueError(f"{len(V)} positions but {len(uv)} texture coordinates")
-    node: dict = {"mesh": 0}
-    lo, hi = V.min(axis=0), V.max(axis=0)
-    size = float((hi - lo).max())
-    if np.abs(V).max() > _GLB_MAX_OFFSET * size:
-        centre = (lo + hi) / 2
-        V = V - centre
-        node["translation"] = centre.tolist()
-    positions = V.astype("<f4")
-    texcoords = np.empty((len(uv), 2), dtype="<f4")
-    texcoords[:, 0] = uv[:, 0]
-    texcoords[:, 1] = 1.0 - uv[:, 1]
-    indices = np.asarray(F).astype("<u4")
-    blobs = [indices.tobytes(), positions.tobytes(), texcoords.tobytes(), png]
-    targets = [_GL_ELEMENT_ARRAY_BUFFER, _GL_ARRAY_BUFFER, _GL_ARRAY_BUFFER, None]
+    nodes, meshes, accessors, blobs, targets = [], [], [], [], []
+    for k, (name, V, F, uv) in enumerate(parts):  # loop over meshes (a few)
+        V = np.asarray(V, dtype=np.float64)
+        uv = np.asarray(uv, dtype=np.float64)
+        if len(uv) != len(V):
+            raise ValueError(f"{len(V)} positions but {len(uv)} texture coordinates")
+        node: dict = {"mesh": k} if name is None else {"name": str(name), "mesh": k}
+        lo, hi = V.min(axis=0), V.max(axis=0)
+        size = float((hi - lo).max())
+        if np.abs(V).max() > _GLB_MAX_OFFSET * size:
+            centre = (lo + hi) / 2
+            V = V - centre
+            node["translation"] = centre.tolist()
+        positions = V.astype("<f4")
+        texcoords = np.empty((len(uv), 2), dtype="<f4")
+        texcoords[:, 0] = uv[:, 0]
+        texcoords[:, 1] = 1.0 - uv[:, 1]
+        indices = np.asarray(F).astype("<u4")
+        first = 3 * k  # this part's accessors and buffer views: indices, positions, uvs
+        mesh: dict = {
+            "primitives": [
+                {
+                    "attributes": {"POSITION": first + 1, "TEXCOORD_0": first + 2},
+                    "indices": first,
+                    "material": 0,
+                    "mode": _GL_TRIANGLES,
+                }
+            ]
+        }
+        if name is not None:
+            mesh = {"name": str(name), **mesh}
+        nodes.append(node)
+        meshes.append(mesh)
+        accessors += [
+            _accessor(first, _GL_UNSIGNED_INT, indices.size, "SCALAR"),
+            _accessor(
+                first + 1,
+                _GL_FLOAT,
+                len(positions),
+                "VEC3",
+                min=positions.min(axis=0).tolist(),  # required for POSITION
+                max=positions.max(axis=0).tolist(),
+            ),
+            _accessor(first + 2, _GL_FLOAT, len(texcoords), "VEC2"),
+        ]
+        blobs += [indices.tobytes(), positions.tobytes(), texcoords.tobytes()]
+        targets += [_GL_ELEMENT_ARRAY_BUFFER, _GL_ARRAY_BUFFER, _GL_ARRAY_BUFFER]
+    blobs.append(png)
+    targets.append(None)
     views, offset = [], 0
     for blob, target in zip(blobs, targets, strict=True):
         view = {"buffer": 0, "byteOffset": offset, "byteLength": len(blob)}
@@ -489,32 +580,10 @@ def _glb_bytes(V: np.ndarray, F: np.ndarray, uv: np.ndarray, png: bytes) -> byte
     gltf = {
         "asset": {"version": "2.0", "generator": f"segparam {__version__}"},
         "scene": 0,
-        "scenes": [{"nodes": [0]}],
-        "nodes": [node],
-        "meshes": [
-            {
-                "primitives": [
-                    {
-                        "attributes": {"POSITION": 1, "TEXCOORD_0": 2},
-                        "indices": 0,
-                        "material": 0,
-                        "mode": _GL_TRIANGLES,
-                    }
-                ]
-            }
-        ],
-        "accessors": [
-            _accessor(0, _GL_UNSIGNED_INT, indices.size, "SCALAR"),
-            _accessor(
-                1,
-                _GL_FLOAT,
-                len(positions),
-                "VEC3",
-                min=positions.min(axis=0).tolist(),  # required for POSITION
-                max=positions.max(axis=0).tolist(),
-            ),
-            _accessor(2, _GL_FLOAT, len(texcoords), "VEC2"),
-        ],
+        "scenes": [{"nodes": list(range(len(nodes)))}],
+        "nodes": nodes,
+        "meshes": meshes,
+        "accessors": accessors,
         "materials": [_GLB_MATERIAL],
         "textures": [{"sampler": 0, "source": 0}],
         "samplers": [
@@ -525,7 +594,7 @@ def _glb_bytes(V: np.ndarray, F: np.ndarray, uv: np.ndarray, png: bytes) -> byte
                 "wrapT": _GL_REPEAT,
             }
         ],
-        "images": [{"bufferView": 3, "mimeType": "image/png"}],
+        "images": [{"bufferView": len(blobs) - 1, "mimeType": "image/png"}],
         "bufferViews": views,
         "buffers": [{"byteLength": len(binary)}],
     }

@@ -43,10 +43,14 @@ __all__ = [
     "check_output_files",
     "check_output_folder",
     "error_reason",
+    "file_safe",
     "fit_name",
     "json_safe",
     "load_mesh",
+    "load_scene",
     "MeshUV",
+    "NamedMesh",
+    "SCENE_SUFFIXES",
     "all_file_names",
     "multi_atlas_file_names",
     "mesh_stem",
@@ -115,23 +119,7 @@ def load_mesh(path: str | os.PathLike, *, uvs: bool = False) -> Any:
         names the file.
     """
     path = Path(path)
-    if not path.exists():
-        raise MeshFileError(f"{path}: no such file")
-    if path.is_dir():
-        raise MeshFileError(f"{path}: is a directory, not a mesh file")
-    suffix = split_suffix(path)[1]
-    if suffix not in SUPPORTED_SUFFIXES:
-        raise MeshFileError(
-            f"{path}: unsupported format {suffix or '(none)'}; "
-            f"supported: {', '.join(SUPPORTED_SUFFIXES)}"
-        )
-    try:
-        with open(path, "rb") as fh:
-            data = fh.read()
-    except OSError as exc:
-        raise MeshFileError(f"{path}: cannot read ({exc.strerror})") from None
-    if not data:
-        raise MeshFileError(f"{path}: file is empty")
+    data, suffix = _read_mesh_file(path)
     uv = uv_F = None
     try:
         if suffix in (".gii", _GII_GZ):
@@ -159,6 +147,118 @@ def load_mesh(path: str | os.PathLike, *, uvs: bool = False) -> Any:
     if uvs:
         return MeshUV(V, F, uv, uv_F)
     return V, F
+
+
+def _read_mesh_file(path: Path) -> tuple[bytes, str]:
+    """The bytes of a mesh file and its suffix, or the one-line reason it cannot be read."""
+    if not path.exists():
+        raise MeshFileError(f"{path}: no such file")
+    if path.is_dir():
+        raise MeshFileError(f"{path}: is a directory, not a mesh file")
+    suffix = split_suffix(path)[1]
+    if suffix not in SUPPORTED_SUFFIXES:
+        raise MeshFileError(
+            f"{path}: unsupported format {suffix or '(none)'}; "
+            f"supported: {', '.join(SUPPORTED_SUFFIXES)}"
+        )
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+    except OSError as exc:
+        raise MeshFileError(f"{path}: cannot read ({exc.strerror})") from None
+    if not data:
+        raise MeshFileError(f"{path}: file is empty")
+    return data, suffix
+
+
+#: Formats that hold a scene of several placed meshes (:func:`load_scene`).
+SCENE_SUFFIXES = (".glb", ".gltf")
+
+
+class NamedMesh(NamedTuple):
+    """One mesh of a file (:func:`load_scene`): its name, positions and triangles."""
+
+    name: str
+    V: np.ndarray
+    F: np.ndarray
+
+
+def load_scene(path: str | os.PathLike) -> list[NamedMesh]:
+    """The meshes of a file, each named: a glTF/GLB scene whose nodes place several meshes
+    gives one mesh per node, else the file's one mesh (:func:`load_mesh`, named after the file).
+
+    A node's mesh is moved by the node's world transform (float64, the parents' transforms
+    included), and its triangles are turned around where the transform mirrors (negative
+    determinant; glTF then reverses the winding), so that each mesh sits and faces as the scene
+    shows it. Names are the node names (a node without a name has trimesh's, e.g.
+    ``geometry_0``); meshes come in the order of the file's meshes. A node that places no
+    triangles (points, lines) is left out. A scene with one mesh reads exactly as
+    :func:`load_mesh`.
+
+    Raises
+    ------
+    MeshFileError
+        As :func:`load_mesh`; a bad mesh in a scene names its node.
+    """
+    path = Path(path)
+    data, suffix = _read_mesh_file(path)
+    if suffix not in SCENE_SUFFIXES:
+        return [NamedMesh(mesh_stem(path), *load_mesh(path))]
+    try:
+        parts = _scene_parts(data, suffix)
+    except MeshFileError as exc:
+        raise MeshFileError(f"{path}: {exc}") from None
+    except Exception as exc:  # parsers raise anything on garbage
+        raise MeshFileError(f"{path}: not a readable {suffix[1:].upper()} mesh ({exc})") from None
+    if len(parts) <= 1:
+        return [NamedMesh(mesh_stem(path), *load_mesh(path))]
+    meshes = []
+    for name, V, F in parts:  # loop over the scene's meshes
+        try:
+            meshes.append(NamedMesh(name, *check_mesh(V, F, allow_degenerate=True)))
+        except InvalidMeshError as exc:
+            raise MeshFileError(f"{path}: node {name}: {exc}") from None
+    return meshes
+
+
+def _scene_parts(data: bytes, suffix: str) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """``(node name, world positions, triangles)`` per node of a glTF/GLB scene that places a
+    mesh with faces (trimesh reads the file; :func:`load_scene` says what is done)."""
+    import io as _io
+
+    import trimesh
+
+    trimesh_log = logging.getLogger("trimesh")
+    level = trimesh_log.level
+    trimesh_log.setLevel(logging.CRITICAL)  # as in _load_trimesh: no tracebacks on stderr
+    try:
+        scene = trimesh.load(
+            _io.BytesIO(data),
+            file_type=suffix[1:],
+            process=False,
+            force="scene",
+            maintain_order=True,
+        )
+    finally:
+        trimesh_log.setLevel(level)
+    order = {name: k for k, name in enumerate(scene.geometry)}  # the file's mesh order
+    nodes = []
+    for node in scene.graph.nodes_geometry:  # loop over the scene's nodes
+        transform, geometry = scene.graph[node]
+        mesh = scene.geometry[geometry]
+        faces = getattr(mesh, "faces", None)
+        if faces is not None and len(faces):
+            nodes.append((order[geometry], str(node), transform, mesh))
+    nodes.sort(key=lambda item: (item[0], item[1]))
+    parts = []
+    for _, name, transform, mesh in nodes:  # loop over the scene's meshes
+        T = np.asarray(transform, dtype=np.float64)
+        V = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3) @ T[:3, :3].T + T[:3, 3]
+        F = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
+        if np.linalg.det(T[:3, :3]) < 0:
+            F = F[:, ::-1].copy()
+        parts.append((name, V, F))
+    return parts
 
 
 def _load_trimesh(data: bytes, suffix: str, *, uvs: bool = False) -> Any:
@@ -1173,6 +1273,18 @@ def atlas_file_names(stem: str, pictures=None) -> dict[str, str]:
     }
 
 
+# Characters no file name may hold on Linux, macOS or Windows (and control characters).
+_UNSAFE_NAME = re.compile(r'[\x00-\x1f/\\:*?"<>|]')
+
+
+def file_safe(name: str) -> str:
+    """``name`` usable as a file name everywhere: characters that Windows, macOS or Linux refuse
+    (``/ \\ : * ? " < > |``, control characters) become ``_``; an empty name, ``.`` or ``..``
+    (a glTF node may be called anything) becomes ``mesh``."""
+    safe = _UNSAFE_NAME.sub("_", str(name)).strip()
+    return "mesh" if safe in ("", ".", "..") else safe
+
+
 def unique_names(names: list[str]) -> list[str]:
     """``names`` with repeats renamed ``<name>_2``, ``<name>_3``... (case-insensitively, as
     file names on some systems)."""
@@ -1189,29 +1301,52 @@ def unique_names(names: list[str]) -> list[str]:
 
 
 def multi_atlas_file_names(
-    stem: str, names: Iterable[str], outdir: str | os.PathLike
+    stem: str,
+    names: Iterable[str],
+    outdir: str | os.PathLike,
+    *,
+    pictures=None,
+    scenes: Iterable[tuple[str, Iterable[int]]] = (),
 ) -> dict[str, Any]:
-    """The files :func:`segparam.export.save_atlases` writes into ``outdir``: the shared
-    ``mtl``, ``checker``, ``uv`` and ``report``, and ``meshes``: per mesh name its ``obj`` and
-    ``glb`` (names shortened by :func:`fit_name` to fit the file system)."""
-    shared = atlas_file_names(atlas_stem(stem, outdir))
+    """The files :func:`segparam.export.save_atlases` writes into ``outdir``, by role.
+
+    Shared by all meshes: ``mtl``, ``checker``, ``uv``, the pictures of ``pictures`` (a
+    :class:`segparam.pictures.PictureOptions`, default preview and viewer) and ``report``, all
+    named after ``stem``. ``meshes``: per mesh name its ``obj`` and, unless a scene holds it,
+    its ``glb``. ``scenes``: per ``(scene name, mesh indices)`` of ``scenes`` one ``glb`` holding
+    those meshes as nodes (a scene name met among the meshes gets ``_2``...). Names are
+    shortened by :func:`fit_name` to fit the file system; two files of the same name
+    (case-insensitively) are refused.
+    """
+    from .pictures import PictureOptions
+
+    names = unique_names([file_safe(name) for name in names])
+    scenes = [(file_safe(name), [int(i) for i in meshes]) for name, meshes in scenes]
+    shared = atlas_file_names(atlas_stem(stem, outdir), pictures or PictureOptions())
     limit = name_max(outdir) - len(".obj")
     meshes = [fit_name(name, limit=limit) for name in names]
-    if len({m.lower() for m in meshes}) != len(meshes):
+    in_scene = {i for _, members in scenes for i in members}
+    scene_names = unique_names(meshes + [name for name, _ in scenes])[len(meshes) :]
+    out: dict[str, Any] = {k: v for k, v in shared.items() if k not in ("obj", "glb")}
+    out["meshes"] = [
+        {"obj": f"{m}.obj"} if i in in_scene else {"obj": f"{m}.obj", "glb": f"{m}.glb"}
+        for i, m in enumerate(meshes)
+    ]
+    out["scenes"] = [
+        {"glb": f"{fit_name(name, limit=limit)}.glb", "meshes": members}
+        for name, (_, members) in zip(scene_names, scenes, strict=True)
+    ]
+    files = all_file_names(out)
+    if len({f.lower() for f in files}) != len(files):
         raise MeshFileError(f"{outdir}: two meshes would write files of the same name")
-    return {
-        "mtl": shared["mtl"],
-        "checker": shared["checker"],
-        "uv": shared["uv"],
-        "report": shared["report"],
-        "meshes": [{"obj": f"{m}.obj", "glb": f"{m}.glb"} for m in meshes],
-    }
+    return out
 
 
 def all_file_names(names: dict[str, Any]) -> list[str]:
     """Every file name of :func:`multi_atlas_file_names`."""
-    files = [v for k, v in names.items() if k != "meshes"]
-    return files + [f for mesh in names["meshes"] for f in mesh.values()]
+    files = [v for k, v in names.items() if k not in ("meshes", "scenes")]
+    files += [f for mesh in names["meshes"] for f in mesh.values()]
+    return files + [scene["glb"] for scene in names.get("scenes", ())]
 
 
 def error_reason(exc: BaseException) -> str:

@@ -29,7 +29,20 @@ from .bake import (
     mean_curvature,
 )
 
-__all__ = ["PictureOptions", "check_bakes", "flat_default", "make_pictures"]
+__all__ = [
+    "SHARED_BAKES",
+    "MeshSet",
+    "PictureOptions",
+    "check_bakes",
+    "check_several",
+    "flat_default",
+    "make_pictures",
+    "merge_atlases",
+]
+
+#: The bakes made for several meshes sharing one texture (``segparam atlas a.obj b.obj``): they
+#: need only the charted meshes. Vertex colours and data files belong to one input file each.
+SHARED_BAKES = ("curvature", "mean-curvature", "gaussian-curvature", "normals")
 
 
 @dataclass(frozen=True)
@@ -92,6 +105,60 @@ def check_bakes(bakes, input_path: str | os.PathLike | None, V_input: np.ndarray
             load_vertex_colors(input_path, V_input)
         elif name not in BAKE_NAMES:
             load_vertex_data(name, len(V_input))
+
+
+def check_several(options: PictureOptions, n_meshes: int) -> None:
+    """Refuse, before any work, the pictures that several meshes in one texture cannot have:
+    ``--flat`` (a flat map is one surface's) and bakes other than :data:`SHARED_BAKES`
+    (vertex colours and per-vertex data files are per input). One line
+    (:class:`~segparam.bake.BakeError`)."""
+    if n_meshes <= 1:
+        return
+    if options.flat:
+        raise BakeError(f"--flat makes the flat map of one mesh, got {n_meshes} meshes")
+    for name in options.bakes:
+        if name not in SHARED_BAKES:
+            raise BakeError(
+                f"--bake {name}: per-input data, but {n_meshes} meshes share the texture; "
+                f"with several meshes bake {', '.join(SHARED_BAKES)}"
+            )
+
+
+@dataclass(frozen=True)
+class MeshSet:
+    """Several atlases that share one texture, seen as one mesh of disjoint parts: what
+    :func:`make_pictures` and :func:`segparam.export.render_uv_layout` read of an atlas (``V``,
+    ``F``, ``uv``, ``uv_F``, ``uv_vertex``, ``chart_of_face``, ``packing``), so that the set
+    gets the pictures of one atlas from the same code (:func:`merge_atlases`)."""
+
+    V: np.ndarray
+    F: np.ndarray
+    uv: np.ndarray
+    uv_F: np.ndarray
+    uv_vertex: np.ndarray
+    chart_of_face: np.ndarray
+    packing: Any
+    cleaning: None = None  # no one input file: no vertex colours or data files to carry
+    remeshing: None = None
+
+
+def merge_atlases(atlases, packing) -> MeshSet:
+    """The :class:`MeshSet` of ``atlases`` packed together into ``packing``: each atlas's rows
+    after the previous ones' (vertices, uv rows, charts numbered on)."""
+    sizes = np.array([[len(a.V), len(a.uv), a.n_charts] for a in atlases], dtype=np.int64)
+    starts = np.vstack([np.zeros((1, 3), dtype=np.int64), np.cumsum(sizes, axis=0)[:-1]])
+    v0, r0, c0 = (starts[:, j] for j in range(3))
+    return MeshSet(
+        V=np.concatenate([a.V for a in atlases]),
+        F=np.concatenate([a.F + o for a, o in zip(atlases, v0, strict=True)]),
+        uv=np.concatenate([a.uv for a in atlases]),
+        uv_F=np.concatenate([a.uv_F + o for a, o in zip(atlases, r0, strict=True)]),
+        uv_vertex=np.concatenate([a.uv_vertex + o for a, o in zip(atlases, v0, strict=True)]),
+        chart_of_face=np.concatenate(
+            [a.chart_of_face + o for a, o in zip(atlases, c0, strict=True)]
+        ),
+        packing=packing,
+    )
 
 
 def _png(pixels: np.ndarray) -> bytes:

@@ -471,13 +471,15 @@ class MultiAtlas:
             }
         )
 
-    def save(self, outdir: str | os.PathLike, *, stem: str = "atlas") -> list[Path]:
-        """Write one OBJ and one GLB per mesh (``<name>.obj``, ``<name>.glb``) sharing
-        ``<stem>.mtl``, ``<stem>_checker.png`` and ``<stem>_uv.png`` (every chart), and one
-        ``report.json``; all or nothing (see :func:`segparam.export.save_atlases`)."""
+    def save(self, outdir: str | os.PathLike, *, stem: str = "atlas", **kwargs: Any) -> list[Path]:
+        """Write one OBJ and one GLB per mesh (``<name>.obj``, ``<name>.glb``; ``scenes=[(name,
+        indices)]`` puts meshes into one GLB of named nodes instead) sharing ``<stem>.mtl``,
+        ``<stem>_checker.png``, ``<stem>_uv.png`` (every chart), the preview and viewer of the
+        whole set (``pictures=``) and one ``report.json``; all or nothing (see
+        :func:`segparam.export.save_atlases`)."""
         from .export import save_atlases
 
-        return save_atlases(self, outdir, stem=stem)
+        return save_atlases(self, outdir, stem=stem, **kwargs)
 
 
 def build_atlases(

@@ -103,6 +103,8 @@ def test_cli_several_inputs_make_one_atlas(tmp_path, capsys):
             "atlas.mtl",
             "atlas_checker.png",
             "atlas_uv.png",
+            "atlas_preview.png",
+            "atlas.html",
             "report.json",
             "plate.obj",
             "plate.glb",
