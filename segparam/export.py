@@ -267,6 +267,23 @@ def _png_bytes(pixels: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
+def _write_tail(stage: Path, uv_name: str, uv_png: bytes, extra: dict, report_name: str, report):
+    """The files every atlas folder ends with: the uv picture, the pictures, ``report.json``."""
+    import json
+
+    (stage / uv_name).write_bytes(uv_png)
+    for name, data in extra.items():
+        (stage / name).write_bytes(data)
+    (stage / report_name).write_text(
+        json.dumps(report, indent=1, sort_keys=False) + "\n", encoding="utf-8"
+    )
+
+
+def _cannot_write(outdir: Path, exc: OSError) -> MeshFileError:
+    """The one-line error of a write that failed (disk full, ...), naming the folder."""
+    return MeshFileError(f"{outdir}: cannot write the atlas files: {error_reason(exc)}")
+
+
 def save_atlas(
     atlas, outdir: str | os.PathLike, *, stem: str = "mesh", size: int | None = None, pictures=None
 ):
@@ -291,7 +308,6 @@ def save_atlas(
         The folder cannot take the files (see :func:`check_output_folder`), or writing failed
         (disk full, ...); one line naming the folder, never a bare OSError.
     """
-    import json
 
     outdir = Path(outdir)
     stem = str(stem)
@@ -329,18 +345,11 @@ def save_atlas(
             (stage / names["glb"]).write_bytes(
                 _glb_bytes(atlas.V[atlas.uv_vertex], atlas.uv_F, atlas.uv, checker)
             )
-            (stage / names["uv"]).write_bytes(uv_png)
-            for name, data in extra.items():
-                (stage / name).write_bytes(data)
-            (stage / names["report"]).write_text(
-                json.dumps(report, indent=1, sort_keys=False) + "\n", encoding="utf-8"
-            )
+            _write_tail(stage, names["uv"], uv_png, extra, names["report"], report)
     except MeshFileError:
         raise
     except OSError as exc:
-        raise MeshFileError(
-            f"{outdir}: cannot write the atlas files: {error_reason(exc)}"
-        ) from None
+        raise _cannot_write(outdir, exc) from None
     return [outdir / name for name in names.values()]
 
 
@@ -387,7 +396,6 @@ def save_atlases(
     list of Path
         The files written.
     """
-    import json
 
     from .pictures import PictureOptions, check_several, merge_atlases
 
@@ -440,18 +448,11 @@ def save_atlases(
                     for i in scene["meshes"]
                 ]
                 (stage / scene["glb"]).write_bytes(_glb_scene_bytes(parts, checker))
-            (stage / names["uv"]).write_bytes(uv_png)
-            for name, data in extra.items():
-                (stage / name).write_bytes(data)
-            (stage / names["report"]).write_text(
-                json.dumps(report, indent=1, sort_keys=False) + "\n", encoding="utf-8"
-            )
+            _write_tail(stage, names["uv"], uv_png, extra, names["report"], report)
     except MeshFileError:
         raise
     except OSError as exc:
-        raise MeshFileError(
-            f"{outdir}: cannot write the atlas files: {error_reason(exc)}"
-        ) from None
+        raise _cannot_write(outdir, exc) from None
     return [outdir / name for name in files]
 
 
