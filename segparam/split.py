@@ -311,8 +311,8 @@ def parameterize_charts(
     sources = [order[bounds[s] : bounds[s + 1]] for s in range(n_src)]
     sub = _submeshes(F, labels, order, bounds)
     # Small charts, all at once: already in mesh indices and units.
-    bulk_rejected = np.zeros(n_src, dtype=bool)
-    final = _bulk_charts(V, F, sub, order, bounds, cfg, size, bulk_rejected)
+    bulk_rejected, bulk_bijective = np.zeros(n_src, dtype=bool), np.zeros(n_src, dtype=bool)
+    final = _bulk_charts(V, F, sub, order, bounds, cfg, size, bulk_rejected, bulk_bijective)
     if progress is not None and final:
         progress(len(final))
     in_bulk = np.zeros(n_src, dtype=bool)
@@ -355,8 +355,9 @@ def parameterize_charts(
         pool.shutdown()
     else:
         results = _solve_in_rounds(
-            V, F, rest, sources, sub, affinity, cfg, seed, size, bulk_rejected, progress, len(final)
-        )
+            V, F, rest, sources, sub, affinity, cfg, seed, size, bulk_rejected, bulk_bijective,
+            progress, len(final),
+        )  # fmt: skip
 
     for src in rest:  # back to mesh indices and units
         faces = sources[src]
@@ -468,6 +469,7 @@ def _bulk_charts(
     cfg: SplitConfig,
     size: float,
     rejected: np.ndarray | None = None,
+    bijective: np.ndarray | None = None,
 ) -> dict[int, tuple[list[Chart], bool]]:
     """The small segmentation charts that map on their first try, mapped all at once.
 
@@ -486,7 +488,8 @@ def _bulk_charts(
     A chart that fails any of these is not in the result: the per-chart path maps or splits it,
     as before. Where :func:`_try_piece` could only fail the same way (a small chart whose
     projection folds, a chart the solver mapped outside the targets), ``rejected[chart]`` is set
-    (when given), so that the caller can split it without trying it again. ``V`` is in the
+    (when given), so that the caller can split it without trying it again; ``bijective[chart]``
+    (when given) is set where the solver's map was bijective, kept or not. ``V`` is in the
     stage's unit frame; the charts returned are in mesh indices and units (``uv * size``).
 
     Returns
@@ -578,12 +581,16 @@ def _bulk_charts(
         except (InvalidMeshError, np.linalg.LinAlgError) as exc:  # not expected: one by one
             log.debug("batched solver failed (%s); solving %d charts one by one", exc, len(take))
             return out
-        ok = maps.quality["bijective"]
         q = maps.quality
-        ok &= _within_targets(q["angle_distortion"], q["l2_stretch"], nf[cand][take], cfg)
+        # a new array: ``&=`` on q["bijective"] itself would rewrite the maps' quality
+        ok = q["bijective"] & _within_targets(
+            q["angle_distortion"], q["l2_stretch"], nf[cand][take], cfg
+        )
         emit(take, vc, maps.uv, maps.quality, ok, "hessian")
         if rejected is not None:
             rejected[cand[take[~ok]]] = True
+        if bijective is not None:
+            bijective[cand[take[q["bijective"]]]] = True
     return out
 
 
@@ -643,6 +650,7 @@ def _solve_in_rounds(
     seed: int,
     size: float,
     bulk_rejected: np.ndarray,
+    bulk_bijective: np.ndarray,
     progress: Callable[[int], None] | None,
     done: int,
 ) -> dict[int, tuple[list[Chart], bool]]:
@@ -686,6 +694,7 @@ def _solve_in_rounds(
         nxt = []
         for k, (src, faces, depth, path, tried) in enumerate(pending):  # loop over pieces
             vertices, local_F = sub.of(src)
+            status: dict = {}
             if k in mapped:  # back from mesh to chart-local indices and units
                 c = mapped[k]
                 chart = dataclasses.replace(
@@ -694,10 +703,13 @@ def _solve_in_rounds(
                 )  # fmt: skip
             elif tried or k in rejected_at:
                 chart = None
+                status["bijective"] = depth == 0 and bool(bulk_bijective[src])
             else:
-                chart = _try_piece(V[vertices], local_F, faces, src, depth, cfg, seed)
-            if depth == 0:
-                first[src] = chart is not None and chart.method != "projection"
+                chart = _try_piece(V[vertices], local_F, faces, src, depth, cfg, seed, status)
+            if depth == 0:  # the solver's first map was bijective (kept, or split for a target)
+                first[src] = (chart is not None and chart.method != "projection") or status.get(
+                    "bijective", False
+                )
             open_pieces[src] -= 1
             if chart is not None:
                 pieces[src].append((path, chart))
@@ -735,9 +747,12 @@ def _solve_source(
     W = None
     while stack:
         faces, depth = stack.pop()
-        chart = _try_piece(V, F, faces, src, depth, cfg, seed)
-        if depth == 0:
-            first = chart is not None and chart.method != "projection"
+        status: dict = {}
+        chart = _try_piece(V, F, faces, src, depth, cfg, seed, status)
+        if depth == 0:  # as in _solve_in_rounds
+            first = (chart is not None and chart.method != "projection") or status.get(
+                "bijective", False
+            )
         if chart is not None:
             pieces.append(chart)
             continue
@@ -756,8 +771,11 @@ def _try_piece(
     depth: int,
     cfg: SplitConfig,
     seed: int,
+    status: dict | None = None,
 ) -> Chart | None:
-    """A bijective chart for these faces, or None if the piece must be split."""
+    """A bijective chart for these faces, or None if the piece must be split. ``status`` (when
+    given) gets ``"bijective"``: whether the solver's map was bijective, within the targets or
+    not (a first-pass success in the paper's sense)."""
     vertices, local_F = submesh(F, faces)
     Vl = V[vertices]
     small = len(faces) < cfg.min_faces or len(vertices) < MIN_POINTS
@@ -779,6 +797,8 @@ def _try_piece(
         except InvalidMeshError as exc:  # not a disk (e.g. a half that pinches): split it
             log.debug("chart %d depth %d: %s", src, depth, exc)
             return None
+        if status is not None:
+            status["bijective"] = bool(result.bijective)
         q = result.quality
         ok = result.bijective and bool(
             _within_targets(q.angle_distortion, q.l2_stretch, len(faces), cfg)
