@@ -610,7 +610,7 @@ def _raster_trial(
     rule: str,
     angles: _Angles,
 ) -> tuple[list[tuple[np.ndarray, int, int]] | None, float, int | None]:
-    """Place all charts at scale s on a canvas 12.5% taller than the texture, by one rule.
+    """Place all charts at scale s on a canvas half again as tall as the texture, by one rule.
 
     The "rest" rule tries every angle of `angles` (fine steps for the charts that are not
     rectangles); the "holes" rule tries quarter turns only. One compiled call
