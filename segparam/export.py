@@ -52,8 +52,8 @@ def write_obj(
 ) -> None:
     """Write an OBJ with optional texture coordinates (``vt``) and a material library.
 
-    Coordinates are written with 17 significant digits: :func:`load_mesh` reads back the same
-    float64 values bit for bit.
+    Coordinates are written with 17 significant digits: :func:`segparam.io.load_mesh` reads back
+    the same float64 values bit for bit.
 
     Parameters
     ----------

@@ -115,19 +115,32 @@ _RULE_CODES = {"rest": canvas.REST, "holes": canvas.HOLES}
 # A trial's canvas is taller than the texture by 1/_HEADROOM of it, so that an over-full trial
 # still places every chart and reports the height it needed (the next guess of the scale).
 _HEADROOM = 2
-# Scale search: relative precision on the global scale and the maximum number of trial packings
-# (5 trials cost brain-20k 0.55 points, 4 trials 1.1 points), the first guess as a fraction of
-# the area bound, and the most trials of a rectangle packing that keeps failing.
+# Scale search (`pack_charts`), a safeguarded secant search on the one global scale:
+# - the first guess, as a fraction of the bound `_scale_bounds` (at the area bound the charts
+#   would have to fill the whole square, which no layout of footprints does);
+_FIRST_GUESS = 0.88
+# - the relative precision on the scale at which the bracket [fits, fails] is narrow enough;
+#   a guess must also stay half of it inside the bracket, or it is replaced by bisection;
 _SCALE_TOL = 0.006
-# Many charts (at least _SMOOTH_CHARTS) fill the height a trial needs smoothly as the scale
-# grows, so a fit that uses all but _FULL of the texture's side ends the search: on 2,000
-# triangles it saves 3 of 6 trials at the same utilization (tiny-300 and 600 sphere halves
-# unchanged too). With few charts the height jumps from one scale to the next and a later trial
-# can still fit a larger scale (brain-20k lost 0.55 points with this rule), so they search on.
+# - the most trials once a layout fits (5 trials cost brain-20k 0.55 points, 4 trials 1.1 points);
+_MAX_TRIALS = 6
+# - the "full" stop: many charts (at least _SMOOTH_CHARTS) fill the height a trial needs smoothly
+#   as the scale grows, so a fit that uses all but _FULL of the texture's side ends the search:
+#   on 2,000 triangles it saves 3 of 6 trials at the same utilization (tiny-300 and 600 sphere
+#   halves unchanged too). With few charts the height jumps from one scale to the next and a later
+#   trial can still fit a larger scale (brain-20k lost 0.55 points with this rule), so they search
+#   on;
 _FULL = 0.006
 _SMOOTH_CHARTS = 100
-_MAX_TRIALS = 6
-_FIRST_GUESS = 0.88
+# - a rectangle trial that fails reports only the fraction of the area it placed: the next scale
+#   shrinks by its square root, by at least 3% and at most by half;
+_SHRINK_LEAST = 0.97
+_SHRINK_MOST = 0.5
+# - until a layout fits, a guess stays at least 3% under the last scale that failed, so the search
+#   always moves down;
+_UNDER_FAILED = 0.97
+# - the most trials while no layout fits (each one 3% smaller at least: 60 reach 17% of the first
+#   guess), before the SolverError.
 _MAX_SHRINK = 60
 _RECT_ALGOS = ("MaxRectsBssf",)
 
@@ -610,7 +623,7 @@ def _raster_trial(
     rule: str,
     angles: _Angles,
 ) -> tuple[list[tuple[np.ndarray, int, int]] | None, float, int | None]:
-    """Place all charts at scale s on a canvas 12.5% taller than the texture, by one rule.
+    """Place all charts at scale s on a canvas half again as tall as the texture, by one rule.
 
     The "rest" rule tries every angle of `angles` (fine steps for the charts that are not
     rectangles); the "holes" rule tries quarter turns only. One compiled call
@@ -891,59 +904,105 @@ def pack_charts(
         return _pack_at_density(uvs, faces, areas3d, cfg)
     charts = _prepare(uvs, faces, areas3d)
     G, p = int(cfg.resolution), int(cfg.padding)
-    trial, rules, order, turns, oriented = _trial_setup(charts, cfg)
+    setup = _trial_setup(charts, cfg)
+    rules = setup[1]
 
-    # Safeguarded secant search on the scale. No scale above `hi` fits. A scale fits when one
-    # of the placement rules fits the charts; the rules run side by side (one thread each: the
-    # compiled trials release the GIL) and the layout that needs less height wins. A trial runs
-    # on a taller canvas and reports the height it needed, whose ratio to the texture predicts
-    # the scale (areas grow with its square); a rectangle trial that fails reports the
-    # fraction of area it placed. Guesses outside the bracket's interior are replaced by
-    # bisection.
+    # Safeguarded secant search on the scale: `lo` is the largest scale that fitted so far, no
+    # scale above `hi` fits. Every trial runs the placement rules side by side (one thread each:
+    # the compiled trials release the GIL); its outcome narrows the bracket and predicts the next
+    # scale, until the stop rule holds.
     hi = _scale_bounds(charts, G, p)
     lo, best = 0.0, None
     s = _FIRST_GUESS * hi
     n_trials = 0
     with ThreadPoolExecutor(max_workers=min(len(rules), os.cpu_count() or 1)) as pool:
-        for n_trials in range(1, _MAX_SHRINK + 1):  # noqa: B007
-
-            def at_scale(rule: str, s: float = s):
-                return trial(charts, order, s, G, p, turns, rule, oriented)
-
-            runs = list(pool.map(at_scale, rules))
-            placed, fraction, need = _best_run(runs, G)
-            logger.debug("pack trial %d: scale %.6g needs %s", n_trials, s, [r[2] for r in runs])
-            full = False
-            if placed is not None:
+        for n_trials in range(1, _MAX_SHRINK + 1):
+            placed, fraction, need = _trial_at_scale(pool, setup, charts, s, G, p, n_trials)
+            fits = placed is not None
+            if fits:
                 lo, best = s, placed
-                full = (
-                    len(charts) >= _SMOOTH_CHARTS
-                    and need is not None
-                    and need - 2 * p >= (G - 2 * p) * (1 - _FULL)
-                )
             else:
                 hi = s
-            if best is not None and (hi / lo <= 1 + _SCALE_TOL or n_trials >= _MAX_TRIALS or full):
+            full = fits and _fills_the_texture(need, G, p, len(charts))
+            if best is not None and _search_done(lo, hi, n_trials, full):
                 break
-            if placed is None and need is None:
-                guess = s * float(np.clip(np.sqrt(fraction), 0.5, 0.97))
-            elif need is not None:
-                guess = s * float(np.sqrt((G - 2 * p) / max(need - 2 * p, 1)))
-            else:
-                guess = np.sqrt(lo * hi)
-            if lo > 0:
-                if not lo * (1 + _SCALE_TOL / 2) <= guess <= hi / (1 + _SCALE_TOL / 2):
-                    guess = np.sqrt(lo * hi)
-            else:
-                guess = min(guess, 0.97 * hi)
-            s = float(guess)
+            s = _next_scale(s, lo, hi, fits, fraction, need, G, p)
     if best is None:
         raise SolverError(
             f"{len(charts)} charts do not fit a {G}x{G} texture with padding {p} at any scale "
             f"down to {s:.3g} texels per unit length"
         )
-    best_s = lo
-    return _finish(charts, best, best_s, G, p, n_trials, cfg.method)
+    return _finish(charts, best, lo, G, p, n_trials, cfg.method)
+
+
+# ----------------------------------------------------------------------------------------------
+# the steps of the scale search
+
+
+def _trial_at_scale(
+    pool: ThreadPoolExecutor, setup: tuple, charts: list[_Chart], s: float, G: int, p: int, k: int
+) -> tuple[list | None, float, int | None]:
+    """Trial `k` of the search: every placement rule of `setup` (:func:`_trial_setup`) at scale
+    `s`, side by side on `pool`, combined by :func:`_best_run` into (placed, fraction, need)."""
+    trial, rules, order, turns, oriented = setup
+    runs = list(pool.map(lambda rule: trial(charts, order, s, G, p, turns, rule, oriented), rules))
+    logger.debug("pack trial %d: scale %.6g needs %s", k, s, [r[2] for r in runs])
+    return _best_run(runs, G)
+
+
+def _fills_the_texture(need: int | None, G: int, p: int, n_charts: int) -> bool:
+    """The "full" stop: a fitting layout of many charts (`_SMOOTH_CHARTS`) whose height uses all
+    but `_FULL` of the texture's side inside the border."""
+    return (
+        n_charts >= _SMOOTH_CHARTS
+        and need is not None
+        and need - 2 * p >= (G - 2 * p) * (1 - _FULL)
+    )
+
+
+def _search_done(lo: float, hi: float, n_trials: int, full: bool) -> bool:
+    """The stop rule, once some layout fitted (``lo > 0``): the bracket is within `_SCALE_TOL`,
+    or `_MAX_TRIALS` trials ran, or the last fit fills the texture."""
+    return hi / lo <= 1 + _SCALE_TOL or n_trials >= _MAX_TRIALS or full
+
+
+def _predicted_scale(
+    s: float, fits: bool, fraction: float, need: int | None, G: int, p: int
+) -> float | None:
+    """The secant step: the scale the trial at `s` predicts, or None when it predicts nothing.
+
+    A trial that reports the height it needed (``need``, on its taller canvas) predicts the
+    scale at which its layout would fill the texture's side: the area a layout covers grows
+    with the scale's square, so ``s * sqrt(inner side / inner height needed)``. A rectangle
+    trial that failed reports only the fraction of the area it placed: ``s * sqrt(fraction)``,
+    kept within [`_SHRINK_MOST`, `_SHRINK_LEAST`] times s. A rectangle trial that fitted
+    reports nothing (the caller bisects).
+    """
+    if not fits and need is None:
+        return s * float(np.clip(np.sqrt(fraction), _SHRINK_MOST, _SHRINK_LEAST))
+    if need is not None:
+        return s * float(np.sqrt((G - 2 * p) / max(need - 2 * p, 1)))
+    return None
+
+
+def _next_scale(
+    s: float, lo: float, hi: float, fits: bool, fraction: float, need: int | None, G: int, p: int
+) -> float:
+    """The next scale to try: the secant prediction (:func:`_predicted_scale`), safeguarded.
+
+    Once a layout fitted (``lo > 0``) a prediction outside the bracket's interior (half of
+    `_SCALE_TOL` in from either end), or none, is replaced by bisection, ``sqrt(lo * hi)``.
+    Before that, the prediction stays at least ``1 - _UNDER_FAILED`` under `hi`, the last scale
+    that failed.
+    """
+    guess = _predicted_scale(s, fits, fraction, need, G, p)
+    if lo > 0:
+        margin = 1 + _SCALE_TOL / 2
+        if guess is None or not lo * margin <= guess <= hi / margin:
+            guess = np.sqrt(lo * hi)
+    else:
+        guess = min(guess, _UNDER_FAILED * hi)
+    return float(guess)
 
 
 def _finish(

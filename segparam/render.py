@@ -32,7 +32,7 @@ __all__ = [
 # (azimuth, elevation) in degrees around the vertical axis (+y, OBJ's and glTF's up): the four
 # sides seen a little from above. Four views of 256 px: 20k faces in 0.04-0.12 s (machine
 # load 4-6), 0.08-0.13 s in a `segparam atlas` run with the kernel's loading (BENCHMARKS.md
-# section 8): within the preview's 0.15 s budget.
+# section 9): within the preview's 0.15 s budget.
 DEFAULT_VIEWS: tuple[tuple[float, float], ...] = ((30, 20), (120, 20), (210, 20), (300, 20))
 DEFAULT_SIZE = 256
 # Camera distance in bounding-sphere radii; the field of view is set so the sphere fills the

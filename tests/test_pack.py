@@ -431,10 +431,35 @@ def test_long_thin_chart_and_wildly_different_areas() -> None:
     np.testing.assert_allclose(ratio, res.scale**2, rtol=1e-9)
 
 
-def test_no_rotation_option_keeps_orientation_choice() -> None:
-    uvs, faces, areas = mixed_charts(8, seed=2)
+def _turns_off_frame(uvs, transforms) -> np.ndarray:
+    """Per chart, its packed rotation off its min-area frame, in degrees in [0, 180]."""
+    turn = np.degrees([np.arctan2(A[1, 0], A[0, 0]) for A in transforms])
+    frames = np.array([np.degrees(min_area_rotation(uv)[1]) for uv in uvs])
+    off = (turn - frames) % 360
+    return np.minimum(off, 360 - off)
+
+
+def test_without_rotation_every_chart_keeps_its_minimum_area_frame() -> None:
+    # rotate=False: every transform is the rotation into the chart's minimum-area frame (no
+    # quarter turn, no finer turn) times a uniform scale, so each packed chart lies wider than
+    # tall, as min_area_rotation leaves it. The same charts with quarter turns allowed turn by
+    # 90 and by 180 degrees, so the check tells the frames apart.
+    uvs, faces, areas = mixed_charts(8, seed=1)
     res = pack_charts(uvs, faces, areas, config=PackConfig(resolution=128, rotate=False))
     assert_valid_layout(res, faces)
+    A = res.transforms[:, :, :2]
+    det = np.linalg.det(A)
+    assert np.all(det > 0)  # no mirror
+    # a rotation times a uniform scale: A A^T / det(A) is the identity
+    np.testing.assert_allclose(
+        A @ A.transpose(0, 2, 1) / det[:, None, None], [np.eye(2)] * 8, atol=1e-12
+    )
+    assert np.all(_turns_off_frame(uvs, res.transforms) < 1e-6)
+    width = np.array([np.ptp(uv, axis=0) for uv in res.uvs])
+    assert np.all(width[:, 0] >= width[:, 1] * (1 - 1e-9))
+    quarter = PackConfig(resolution=128, angle_steps=1)
+    off = _turns_off_frame(uvs, pack_charts(uvs, faces, areas, config=quarter).transforms)
+    assert np.isclose(off, 90).any() and np.isclose(off, 180).any()
 
 
 # ----------------------------------------------------------------------------------------------

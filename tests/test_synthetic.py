@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 import pytest
 
@@ -35,6 +37,29 @@ def _total_abs_curvature(V: np.ndarray, F: np.ndarray) -> float:
 @pytest.fixture(scope="module")
 def surface() -> tuple[np.ndarray, np.ndarray]:
     return brain_like_surface(20000, seed=3)
+
+
+@pytest.fixture(scope="module")
+def shared_surface():
+    """``brain_like_surface(n_faces, **options)``, built once per module for each distinct set of
+    arguments (defaults filled in, so ``folding=1.0`` and the default are one surface): several
+    tests read the same 20k and 80k hemispheres (0.3-2.5 s each). The arrays are read-only, so
+    no test can change what another one reads."""
+    signature = inspect.signature(brain_like_surface)
+    built: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+
+    def get(n_faces: int, **options) -> tuple[np.ndarray, np.ndarray]:
+        bound = signature.bind(n_faces, **options)
+        bound.apply_defaults()
+        key = tuple(bound.arguments.items())
+        if key not in built:
+            V, F = brain_like_surface(n_faces, **options)
+            V.flags.writeable = False
+            F.flags.writeable = False
+            built[key] = V, F
+        return built[key]
+
+    return get
 
 
 @pytest.fixture(scope="module")
@@ -93,9 +118,9 @@ def test_deterministic_and_seeded():
     assert not np.allclose(V1, V3)
 
 
-def test_no_folding_is_smooth_ellipsoid():
+def test_no_folding_is_smooth_ellipsoid(shared_surface):
     V0, F0 = brain_like_surface(20000, folding=0.0)
-    V1, F1 = brain_like_surface(20000, folding=1.0)
+    V1, F1 = shared_surface(20000, folding=1.0)
     k0 = _total_abs_curvature(V0, F0)
     k1 = _total_abs_curvature(V1, F1)
     assert k0 == pytest.approx(4.0 * np.pi, rel=0.02)  # convex: Gauss-Bonnet, no negative K
@@ -104,9 +129,9 @@ def test_no_folding_is_smooth_ellipsoid():
     assert 27.0 < r.min() and r.max() < 71.0
 
 
-def test_parameters_change_the_folds():
+def test_parameters_change_the_folds(shared_surface):
     V, _ = brain_like_surface(20000, folding=0.5)
-    W, _ = brain_like_surface(20000, folding=1.0)
+    W, _ = shared_surface(20000, folding=1.0)
     depth_half = np.ptp(np.linalg.norm(V, axis=1))
     depth_full = np.ptp(np.linalg.norm(W, axis=1))
     assert depth_half < depth_full
@@ -261,8 +286,8 @@ def _direction_flips(V: np.ndarray, F: np.ndarray) -> int:
 
 @pytest.mark.parametrize("connectivity", ["uniform", "icosahedral"])
 @pytest.mark.parametrize("n_faces", [5000, 20000])
-def test_cortex_is_as_folded_as_real_pial(n_faces, connectivity):
-    V, F = brain_like_surface(n_faces, connectivity=connectivity)
+def test_cortex_is_as_folded_as_real_pial(n_faces, connectivity, shared_surface):
+    V, F = shared_surface(n_faces, connectivity=connectivity)
     s = _check_like_pial(V, F)
     assert s["min_angle_p1"] > 10.0  # fsaverage5 pial: 13.5
     assert _direction_flips(V, F) == 0
@@ -270,14 +295,14 @@ def test_cortex_is_as_folded_as_real_pial(n_faces, connectivity):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("n_faces", [80000, 320000, 1000000])
-def test_cortex_is_as_folded_as_real_pial_large(n_faces):
-    V, F = brain_like_surface(n_faces)
+def test_cortex_is_as_folded_as_real_pial_large(n_faces, shared_surface):
+    V, F = shared_surface(n_faces)
     _check_like_pial(V, F)
     assert _direction_flips(V, F) == 0
 
 
-def test_cortex_default_is_far_more_folded_than_gentle():
-    V, F = brain_like_surface(20000)
+def test_cortex_default_is_far_more_folded_than_gentle(shared_surface):
+    V, F = shared_surface(20000)
     G, H = brain_like_surface(20000, style="gentle")
     cortex = synthetic.surface_statistics(V, F)
     gentle = synthetic.surface_statistics(G, H)
@@ -299,9 +324,9 @@ def test_cortex_has_no_self_intersections():
             assert _direction_flips(V, F) == 0
 
 
-def test_cortex_sulci_are_deep_and_narrow():
+def test_cortex_sulci_are_deep_and_narrow(shared_surface):
     # the groove profile: depth below the smooth ellipsoid along each vertex's ray
-    V, F = brain_like_surface(80000, folding=1.0, seed=0)
+    V, F = shared_surface(80000, folding=1.0, seed=0)
     E, _ = brain_like_surface(80000, folding=0.0, seed=0)
     U = V / np.linalg.norm(V, axis=1, keepdims=True)
     r = synthetic._ellipsoid(U)[0]
@@ -317,8 +342,8 @@ def test_cortex_sulci_are_deep_and_narrow():
     assert len(E) == len(V)
 
 
-def test_icosahedral_connectivity_like_a_template():
-    V, F = brain_like_surface(20000, connectivity="icosahedral")
+def test_icosahedral_connectivity_like_a_template(shared_surface):
+    V, F = shared_surface(20000, connectivity="icosahedral")
     assert len(F) == 20480 and len(V) == 10242  # fsaverage5's sizes
     valence = np.bincount(F.ravel())
     assert np.sum(valence == 5) == 12 and np.all(valence[valence != 5] == 6)
