@@ -246,15 +246,6 @@ def fits(forbid, height, width, mask, rows, cols, row, col):  # pragma: no cover
 
 
 @njit(cache=True, nogil=True)
-def _on_edge(mask, rows, cols, i, j, di, dj):  # pragma: no cover - compiled
-    """Whether footprint cell (i, j) is in it and its neighbour (i + di, j + dj) is not."""
-    if not mask[i, j]:
-        return False
-    ni, nj = i + di, j + dj
-    return ni < 0 or nj < 0 or ni >= rows or nj >= cols or not mask[ni, nj]
-
-
-@njit(cache=True, nogil=True)
 def _leading_edge(mask, rows, cols, di, dj):  # pragma: no cover - compiled
     """Cells (i, j) of the footprint whose neighbour (i + di, j + dj) is not in it: the texels
     that a one-texel move by (di, dj) newly covers. (Counted first: a rows * cols buffer would
@@ -262,15 +253,20 @@ def _leading_edge(mask, rows, cols, di, dj):  # pragma: no cover - compiled
     n = 0
     for i in range(rows):
         for j in range(cols):
-            n += _on_edge(mask, rows, cols, i, j, di, dj)
+            if mask[i, j]:
+                ni, nj = i + di, j + dj
+                if ni < 0 or nj < 0 or ni >= rows or nj >= cols or not mask[ni, nj]:
+                    n += 1
     edge = np.empty((n, 2), dtype=np.int64)
     n = 0
     for i in range(rows):
         for j in range(cols):
-            if _on_edge(mask, rows, cols, i, j, di, dj):
-                edge[n, 0] = i
-                edge[n, 1] = j
-                n += 1
+            if mask[i, j]:
+                ni, nj = i + di, j + dj
+                if ni < 0 or nj < 0 or ni >= rows or nj >= cols or not mask[ni, nj]:
+                    edge[n, 0] = i
+                    edge[n, 1] = j
+                    n += 1
     return edge
 
 
