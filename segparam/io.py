@@ -221,26 +221,32 @@ def load_scene(path: str | os.PathLike) -> list[NamedMesh]:
     return meshes
 
 
-def _scene_parts(data: bytes, suffix: str) -> list[tuple[str, np.ndarray, np.ndarray]]:
-    """``(node name, world positions, triangles)`` per node of a glTF/GLB scene that places a
-    mesh with faces (trimesh reads the file; :func:`load_scene` says what is done)."""
+def _trimesh_quietly(data: bytes, suffix: str, force: str):
+    """``trimesh.load`` of a file's bytes as a ``"mesh"`` or a ``"scene"``, file order kept.
+
+    trimesh logs tracebacks for parts we drop (normals, colours): they are kept off stderr.
+    """
     import io as _io
 
     import trimesh
 
     trimesh_log = logging.getLogger("trimesh")
     level = trimesh_log.level
-    trimesh_log.setLevel(logging.CRITICAL)  # as in _load_trimesh: no tracebacks on stderr
+    trimesh_log.setLevel(logging.CRITICAL)
     try:
-        scene = trimesh.load(
-            _io.BytesIO(data),
-            file_type=suffix[1:],
-            process=False,
-            force="scene",
+        return trimesh.load(
+            _io.BytesIO(data), file_type=suffix[1:], process=False, force=force,
             maintain_order=True,
-        )
+        )  # fmt: skip
     finally:
         trimesh_log.setLevel(level)
+
+
+def _scene_parts(data: bytes, suffix: str) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """``(node name, world positions, triangles)`` per node of a glTF/GLB scene that places a
+    mesh with faces (trimesh reads the file; :func:`load_scene` says what is done)."""
+
+    scene = _trimesh_quietly(data, suffix, "scene")
     order = {name: k for k, name in enumerate(scene.geometry)}  # the file's mesh order
     nodes = []
     for node in scene.graph.nodes_geometry:  # loop over the scene's nodes
@@ -263,26 +269,10 @@ def _scene_parts(data: bytes, suffix: str) -> list[tuple[str, np.ndarray, np.nda
 
 def _load_trimesh(data: bytes, suffix: str, *, uvs: bool = False) -> Any:
     """STL, GLB and glTF through trimesh (OBJ, PLY and OFF have readers of their own below)."""
-    import io as _io
-
-    import trimesh
 
     if suffix == ".stl":
         data = _stl_bytes(data)
-    # trimesh logs tracebacks for parts we drop (normals, colours): keep them off stderr.
-    trimesh_log = logging.getLogger("trimesh")
-    level = trimesh_log.level
-    trimesh_log.setLevel(logging.CRITICAL)
-    try:
-        loaded = trimesh.load(
-            _io.BytesIO(data),
-            file_type=suffix[1:],
-            process=False,
-            force="mesh",
-            maintain_order=True,
-        )
-    finally:
-        trimesh_log.setLevel(level)
+    loaded = _trimesh_quietly(data, suffix, "mesh")
     V = np.asarray(loaded.vertices, dtype=np.float64).reshape(-1, 3)
     F = np.asarray(loaded.faces, dtype=np.int64).reshape(-1, 3)
     if not uvs:
