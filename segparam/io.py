@@ -642,20 +642,9 @@ def _load_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     if len(counts_words) < 2 or min(nv, nf) < 0:
         raise MeshFileError("not a readable OFF mesh (no vertex and face counts after OFF)")
     body, line0 = text[pos:], text.count(b"\n", 0, pos)
-    token_line, counts = _token_table(body)
-    rows = np.flatnonzero(counts)  # non-blank lines
-    if len(rows) != nv + nf:
-        raise MeshFileError(
-            f"header announces {_announced([('vertex', nv), ('face', nf)])} "
-            f"({nv + nf} lines of data), data holds {len(rows)} lines"
-        )
-    values = _numbers(body, len(token_line), np.float64)
-    if values is None:
-        row, token = _bad_token(body, _NOT_A_FLOAT)
-        where = f"line {line0 + row + 1} holds" if row >= 0 else "data holds"
-        raise MeshFileError(f"{where} a value that is not a number: {token!r}")
-    row_counts = counts[rows]
-    row_first = np.cumsum(row_counts) - row_counts
+    token_line, _, rows, values, row_counts, row_first = _data_table(
+        body, [("vertex", nv), ("face", nf)], line0, ""
+    )
     row_line = line0 + rows + 1
     short = np.flatnonzero(row_counts[:nv] < 3)
     if len(short):
@@ -826,6 +815,33 @@ def _ply_header(data: bytes) -> tuple[str, list[_PlyElement], int, int]:
     return fmt, elements, end.end(), data.count(b"\n", 0, end.end())
 
 
+def _data_table(text: bytes, announced: list[tuple[str, int]], line0: int, prefix: str):
+    """The data lines after an ASCII header (OFF, PLY): ``(token_line, counts, rows, values,
+    row_counts, row_first)`` -- the line of each token, tokens per line, the non-blank lines,
+    every token as a float, and per non-blank line its token count and first token.
+
+    The header's ``announced`` (name, count) pairs must add up to the non-blank lines, and every
+    token must be a number (else one line naming the first bad one; ``line0`` lines precede
+    ``text`` in the file, ``prefix`` starts the message).
+    """
+    token_line, counts = _token_table(text)
+    rows = np.flatnonzero(counts)  # non-blank lines
+    expected = sum(n for _, n in announced)
+    if len(rows) != expected:
+        raise MeshFileError(
+            f"header announces {_announced(announced)} "
+            f"({expected} lines of data), data holds {len(rows)} lines"
+        )
+    values = _numbers(text, len(token_line), np.float64)
+    if values is None:
+        row, token = _bad_token(text, _NOT_A_FLOAT)
+        where = f"line {line0 + row + 1} holds" if row >= 0 else "data holds"
+        raise MeshFileError(f"{prefix}{where} a value that is not a number: {token!r}")
+    row_counts = counts[rows]
+    row_first = np.cumsum(row_counts) - row_counts
+    return token_line, counts, rows, values, row_counts, row_first
+
+
 def _announced(counts: list[tuple[str, int]]) -> str:
     """'3 vertices and 1 face' from [('vertex', 3), ('face', 1)]."""
     words = [
@@ -842,21 +858,9 @@ def _ply_ascii(body: bytes, elements, line0: int, wanted) -> dict:
     ``(items, lengths)``.
     """
     text = _clean_text(body, "PLY", comments=False)
-    token_line, counts = _token_table(text)
-    rows = np.flatnonzero(counts)  # non-blank lines
-    expected = sum(e.size for e in elements)
-    if len(rows) != expected:
-        raise MeshFileError(
-            f"header announces {_announced([(e.name, e.size) for e in elements])} "
-            f"({expected} lines of data), data holds {len(rows)} lines"
-        )
-    values = _numbers(text, len(token_line), np.float64)
-    if values is None:
-        row, token = _bad_token(text, _NOT_A_FLOAT)
-        where = f"line {line0 + row + 1} holds" if row >= 0 else "data holds"
-        raise MeshFileError(f"PLY {where} a value that is not a number: {token!r}")
-    row_counts = counts[rows]
-    row_first = np.cumsum(row_counts) - row_counts
+    _, counts, rows, values, row_counts, row_first = _data_table(
+        text, [(e.name, e.size) for e in elements], line0, "PLY "
+    )
     out: dict[str, dict] = {}
     done = 0
     for e in elements:  # the header's few elements and properties
