@@ -267,6 +267,19 @@ def _png_bytes(pixels: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
+def _write_material(stage: Path, mtl_name: str, checker_name: str) -> bytes:
+    """The checker texture and the MTL file that maps it; returns the PNG bytes (the GLB embeds
+    them too)."""
+    checker = _checker_png(1024)
+    (stage / checker_name).write_bytes(checker)
+    (stage / mtl_name).write_text(
+        f"# written by segparam\nnewmtl atlas\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\n"
+        f"map_Kd {checker_name}\n",
+        encoding="utf-8",
+    )
+    return checker
+
+
 def _write_tail(stage: Path, uv_name: str, uv_png: bytes, extra: dict, report_name: str, report):
     """The files every atlas folder ends with: the uv picture, the pictures, ``report.json``."""
     import json
@@ -327,13 +340,7 @@ def save_atlas(
         report["timings"] = {**report.get("timings", {}), **seconds}
         report["pictures"] = pictures_info
         with staged_outputs(outdir) as stage:
-            checker = _checker_png(1024)
-            (stage / names["checker"]).write_bytes(checker)
-            (stage / names["mtl"]).write_text(
-                f"# written by segparam\nnewmtl atlas\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\n"
-                f"map_Kd {names['checker']}\n",
-                encoding="utf-8",
-            )
+            checker = _write_material(stage, names["mtl"], names["checker"])
             write_obj(
                 stage / names["obj"],
                 atlas.V,
@@ -417,13 +424,7 @@ def save_atlases(
         report["pictures"] = pictures_info
         report["timings"] = seconds
         with staged_outputs(outdir) as stage:
-            checker = _checker_png(1024)
-            (stage / names["checker"]).write_bytes(checker)
-            (stage / names["mtl"]).write_text(
-                f"# written by segparam\nnewmtl atlas\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\n"
-                f"map_Kd {names['checker']}\n",
-                encoding="utf-8",
-            )
+            checker = _write_material(stage, names["mtl"], names["checker"])
             for atlas, files_of in zip(atlases, names["meshes"], strict=True):  # per mesh
                 write_obj(
                     stage / files_of["obj"],
