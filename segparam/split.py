@@ -706,10 +706,8 @@ def _solve_in_rounds(
                 status["bijective"] = depth == 0 and bool(bulk_bijective[src])
             else:
                 chart = _try_piece(V[vertices], local_F, faces, src, depth, cfg, seed, status)
-            if depth == 0:  # the solver's first map was bijective (kept, or split for a target)
-                first[src] = (chart is not None and chart.method != "projection") or status.get(
-                    "bijective", False
-                )
+            if depth == 0:
+                first[src] = _first_pass(chart, status)
             open_pieces[src] -= 1
             if chart is not None:
                 pieces[src].append((path, chart))
@@ -749,10 +747,8 @@ def _solve_source(
         faces, depth = stack.pop()
         status: dict = {}
         chart = _try_piece(V, F, faces, src, depth, cfg, seed, status)
-        if depth == 0:  # as in _solve_in_rounds
-            first = (chart is not None and chart.method != "projection") or status.get(
-                "bijective", False
-            )
+        if depth == 0:
+            first = _first_pass(chart, status)
         if chart is not None:
             pieces.append(chart)
             continue
@@ -761,6 +757,12 @@ def _solve_source(
         parts = divide(W, faces, seed=seed)
         stack.extend((p, depth + 1) for p in reversed(parts) if len(p))
     return pieces, first
+
+
+def _first_pass(chart: Chart | None, status: dict) -> bool:
+    """Whether a chart's first try was a first-pass success: the solver's map was bijective,
+    kept or split for a target (``status`` from :func:`_try_piece`); a projection is not."""
+    return (chart is not None and chart.method != "projection") or status.get("bijective", False)
 
 
 def _try_piece(
