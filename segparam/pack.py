@@ -40,7 +40,6 @@ texel square intersect.
 
 from __future__ import annotations
 
-import functools
 import logging
 import os
 from collections.abc import Sequence
@@ -560,7 +559,8 @@ class _Angles:
     Scale-free, so built once per `pack_charts` call. Per chart and angle (``a * 90 / steps``
     degrees from the minimum-area frame, ``steps = angles`` unless the chart is a rectangle):
     the chart's points turned by the angle with their minimum corner at the origin (3-D
-    units), their extent, and the rotation and offset that map them back.
+    units), their extent, and the rotation and offset that map them back. It also keeps, for
+    the packing it serves, the empty trial canvas of each texture size (`empty_canvas`).
     """
 
     def __init__(self, charts: list[_Chart], angles: int) -> None:
@@ -594,6 +594,18 @@ class _Angles:
         self.el_ptr = np.r_[0, np.cumsum([len(e) for e in elems])].astype(np.int64)
         self.elems = np.ascontiguousarray(np.concatenate(elems), dtype=np.int64)
         self.fill = np.array([ch.boundary is not None for ch in charts], dtype=np.bool_)
+        self._canvases: dict[tuple[int, int, int], tuple] = {}
+
+    def empty_canvas(self, resolution: int, padding: int, block: int) -> tuple:
+        """The empty trial canvas (texture width, `_HEADROOM` taller), built once per size and
+        packing: every trial starts from a copy (building it cost 2 of a 3-chart trial's
+        ~30 ms). It lives as long as this object, so a large texture's canvas is not kept
+        after the packing."""
+        key = (resolution, padding, block)
+        if key not in self._canvases:
+            height = resolution + resolution // _HEADROOM
+            self._canvases[key] = canvas.new_canvas(resolution, height, padding, block)
+        return self._canvases[key]
 
     def to_texels(self, i: int, a: int, k: int, s: float) -> np.ndarray:
         """(3, 3) affine from chart i's q to its footprint's texels: angle a, k quarter turns."""
@@ -603,14 +615,6 @@ class _Angles:
         to_tex[:2, :2] = s * self.rot[e]
         to_tex[:2, 2] = off - s * self.low[e]
         return _turn(k, int(n[0]), int(n[1])) @ to_tex
-
-
-@functools.lru_cache(maxsize=4)
-def _empty_canvas(resolution: int, padding: int, block: int) -> tuple:
-    """The empty trial canvas (texture width, `_HEADROOM` taller), built once per size: every
-    trial starts from a copy (building it cost 2 of a 3-chart trial's ~30 ms)."""
-    height = resolution + resolution // _HEADROOM
-    return canvas.new_canvas(resolution, height, padding, block)
 
 
 def _raster_trial(
@@ -643,7 +647,7 @@ def _raster_trial(
     n_placed, result, need = canvas.trial(
         angles.Q, angles.q_ptr, angles.ext, angles.elems, angles.el_ptr, angles.fill,
         angles.entry_ptr, np.asarray(order, dtype=np.int64), float(s),
-        _empty_canvas(int(resolution), int(padding), block), int(padding), int(turns),
+        angles.empty_canvas(int(resolution), int(padding), block), int(padding), int(turns),
         _RULE_CODES[rule], block, _MARGIN, _PACK_EPS,
         _RESTING_PER_ORIENTATION, _RESTING_STARTS, _CANDIDATES, _SKY_SAMPLES, _SLIDE_STEPS,
         _MIN_TURNING_SIDE,
