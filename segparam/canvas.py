@@ -677,9 +677,10 @@ def trial(
             n_s = 0
             for o in range(n_kept):
                 r, c = shape[o, 0], shape[o, 1]
-                got, rr, cc = resting(
-                    bottoms[o], c, sky, sky_min, height - pad - r, per_orientation, samples
-                )
+                top = height - pad - r
+                if n_s == n_starts:  # a start must come no higher than the worst one kept
+                    top = min(top, int(np.floor(s_key[n_starts - 1] - cy[o])))
+                got, rr, cc = resting(bottoms[o], c, sky, sky_min, top, per_orientation, samples)
                 for g in range(got):
                     key = rr[g] + cy[o]
                     pos = n_s
