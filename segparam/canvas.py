@@ -440,9 +440,14 @@ def coarse_runs(mask, rows, cols, block):  # pragma: no cover - compiled
     cc = (cols + block - 1) // block
     cm = np.zeros((cr, cc), dtype=np.bool_)
     for i in range(rows):
-        for j in range(cols):
-            if mask[i, j]:
-                cm[i // block, j // block] = True
+        R = i // block
+        for C in range(cc):
+            if cm[R, C]:  # already hit by an earlier texel row of this block row
+                continue
+            for j in range(C * block, min((C + 1) * block, cols)):
+                if mask[i, j]:
+                    cm[R, C] = True
+                    break
     runs = np.empty((cr * ((cc + 1) // 2), 3), dtype=np.int64)
     n = 0
     widest = 0
