@@ -43,7 +43,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from segparam.raster import _fill_into, _raster_into, dilate_kernel
+from segparam.raster import _raster_into, dilate_kernel, outline_winding
 
 REST = 0
 HOLES = 1
@@ -108,16 +108,30 @@ def turned(base, rows, cols, k, out):  # pragma: no cover - compiled
 def _profiles(base, rows, cols):  # pragma: no cover - compiled
     """One pass over a footprint: per column its lowest and highest row, per row its left-most
     and right-most column (`_EMPTY` / -1 where empty), and its centroid (row, col)."""
+    return _filled_profiles(base, np.zeros((0, 0), dtype=np.int32), rows, cols)
+
+
+@njit(cache=True, nogil=True)
+def _filled_profiles(base, diff, rows, cols):  # pragma: no cover - compiled
+    """`_profiles`, filling the footprint in the same pass when `diff` holds the winding
+    increments of its outline (`raster.outline_winding`; an empty `diff`: nothing to fill):
+    one pass over the texels instead of two."""
     low = np.full(cols, _EMPTY, dtype=np.int64)
     high = np.full(cols, -1, dtype=np.int64)
     left = np.full(rows, _EMPTY, dtype=np.int64)
     right = np.full(rows, -1, dtype=np.int64)
+    filling = diff.shape[0] > 0
     total = 0
     sum_r = 0
     sum_c = 0
     for i in range(rows):
         n = 0
+        w = 0
         for j in range(cols):
+            if filling:
+                w += diff[i, j]
+                if w > 0:
+                    base[i, j] = True
             if base[i, j]:
                 n += 1
                 sum_c += j
@@ -601,6 +615,7 @@ def trial(
     _sky_minima(sky, sky_min, 0, width)
     result = np.full((len(entry_ptr) - 1, 6), -1, dtype=np.int64)
     need = 0
+    no_fill = np.zeros((0, 0), dtype=np.int32)
     for t in range(len(order)):
         i = order[t]
         e0 = entry_ptr[i]
@@ -637,11 +652,12 @@ def trial(
                 P[v, 0] = Q[q_ptr[e] + v, 0] * s + off0
                 P[v, 1] = Q[q_ptr[e] + v, 1] * s + off1
             base = flat[base_off[a] : base_off[a + 1]].reshape((n1, n0))
-            if fill[i]:
-                _fill_into(P, El, eps, base)
+            if fill[i]:  # the outline's edges now, the inside in the profiles' pass
+                diff = outline_winding(P, El, eps, base)
             else:
                 _raster_into(P, El, eps, base)
-            low, high, left, right, cy0, cx0 = _profiles(base, n1, n0)
+                diff = no_fill
+            low, high, left, right, cy0, cx0 = _filled_profiles(base, diff, n1, n0)
             first = n_kept
             for k in range(turns):
                 r, c, y = _turned_bottom(
