@@ -124,22 +124,26 @@ class FixedPattern:
         self._rows, self._cols = unique % n, unique // n
         self.n = int(n)
         self._symbolic = None
+        self._matrix = None  # the cvxopt matrix: its values are replaced, its pattern kept
 
     def solver(self, values: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
         """Factorize the matrix with these entry values (aligned with the constructor's
-        entries); return ``B -> A^-1 B``. Falls back to :func:`spd_solver` when cvxopt is missing
-        or the matrix is not numerically positive definite."""
+        entries); return ``B -> A^-1 B``, valid until the next call. Falls back to
+        :func:`spd_solver` when cvxopt is missing or the matrix is not numerically positive
+        definite."""
         data = np.bincount(self._slot, weights=values, minlength=len(self._rows))
         try:
             from cvxopt import cholmod, matrix, spmatrix
 
-            M = spmatrix(
-                matrix(data), matrix(self._rows.astype(np.intp)),
-                matrix(self._cols.astype(np.intp)), (self.n, self.n),
-            )  # fmt: skip
-            if self._symbolic is None:
-                self._symbolic = cholmod.symbolic(M, uplo="L")
-            cholmod.numeric(M, self._symbolic)
+            if self._matrix is None:
+                self._matrix = spmatrix(
+                    matrix(data), matrix(self._rows.astype(np.intp)),
+                    matrix(self._cols.astype(np.intp)), (self.n, self.n),
+                )  # fmt: skip
+                self._symbolic = cholmod.symbolic(self._matrix, uplo="L")
+            else:  # the values in the matrix's own (column-major) order: the unique keys'
+                self._matrix.V = matrix(data)
+            cholmod.numeric(self._matrix, self._symbolic)
         except (ImportError, ArithmeticError) as exc:
             log.debug("no Cholesky refactorization (%r); factorizing anew", exc)
             lower = sp.csc_matrix((data, (self._rows, self._cols)), shape=(self.n, self.n))
