@@ -44,6 +44,7 @@ from .errors import InvalidMeshError, check_choice, check_int, check_number
 from .linalg import one_blas_thread, smallest_eigenpairs, spd_solver
 from .mesh import (
     boundary_edges,
+    boundary_loops,
     check_mesh,
     edges,
     face_areas,
@@ -841,6 +842,12 @@ class HessianSolver:
         Y, values = hessian_eigenmap(self.K, seed=seed, guess=guess)
         t1 = time.perf_counter()
         frames = inverse_frames(triangle_frames(self._Vn, self.F))  # shared by every measure
+        B = boundary_edges(self.F)
+        boundary = (B, boundary_loops(self.F, boundary=B))  # F's alone: once for every measure
+
+        def measure(x: np.ndarray) -> ChartQuality:
+            return chart_quality(self._Vn, self.F, x, frames, boundary=boundary)
+
         uv = orient(isometric_fit(self._Vn, self.F, Y, frames), self.F)
         t2 = time.perf_counter()
         refined = False
@@ -851,20 +858,20 @@ class HessianSolver:
                 self._Vn, self.F, uv, iterations=refine_iterations, inv_frames=frames
             )
         if steps:
-            q_r = chart_quality(self._Vn, self.F, uv_r, frames)
+            q_r = measure(uv_r)
             if q_r.bijective:
                 uv, quality, refined = uv_r, q_r, True
             else:
-                quality = chart_quality(self._Vn, self.F, uv, frames)
+                quality = measure(uv)
                 if not quality.bijective and q_r.n_flipped < quality.n_flipped:
                     uv, quality, refined = uv_r, q_r, True
         if quality is None:
-            quality = chart_quality(self._Vn, self.F, uv, frames)
+            quality = measure(uv)
         if refine == "slim" and quality.n_flipped == 0 and quality.n_degenerate == 0:
             uv_s, moved = slim_refine(
                 self._Vn, self.F, uv, inv_frames=frames, angle_weight=angle_weight
             )
-            q_s = chart_quality(self._Vn, self.F, uv_s, frames) if moved[0] else None
+            q_s = measure(uv_s) if moved[0] else None
             if (
                 q_s is not None
                 and q_s.bijective

@@ -502,7 +502,7 @@ def _bulk_charts(
     nv = np.diff(sub.vptr)
     small = (nf < cfg.min_faces) | (nv < MIN_POINTS)
     # Planar: every face normal within PLANAR_TOL of the chart's first face's.
-    N = face_normals(V, F)[order]
+    N = face_normals(V, F[order])  # only the faces of these charts (rounds pass few)
     lab = np.repeat(np.arange(n_src), nf)
     dev = np.abs(N - N[bounds[:-1]][lab]).max(axis=1)  # the last chart has faces: in range
     planar = np.zeros(n_src, dtype=bool)
