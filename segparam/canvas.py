@@ -43,7 +43,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from segparam.raster import _raster_into, dilate_kernel, outline_winding
+from segparam.raster import _raster_into, outline_winding
 
 REST = 0
 HOLES = 1
@@ -333,31 +333,42 @@ def _slide_edges(forbid, down, left, row, col, max_steps):  # pragma: no cover -
 def place(
     forbid, sky, coarse, prefix, max_free, free_bits, block, mask, rows, cols, row, col, pad
 ):  # pragma: no cover - compiled
-    """Forbid the footprint dilated by `pad`, raise the skyline to its top, refresh the pool."""
-    grown = dilate_kernel(mask[:rows, :cols], pad)
+    """Forbid the footprint dilated by `pad`, raise the skyline to its top, refresh the pool.
+
+    Written straight into the canvas, run by run (no dilated copy): a run of footprint texels
+    in a row forbids the rectangle `pad` texels around it, and a column's skyline rises to
+    `pad` above the highest footprint texel within `pad` columns of it."""
     r0, c0 = row - pad, col - pad
     H, W = forbid.shape
-    for i in range(grown.shape[0]):
-        ri = r0 + i
-        if ri < 0 or ri >= H:
-            continue
-        for j in range(grown.shape[1]):
-            cj = c0 + j
-            if 0 <= cj < W and grown[i, j]:
-                forbid[ri, cj] = True
-    for j in range(grown.shape[1]):
-        cj = c0 + j
-        if cj < 0 or cj >= sky.shape[0]:
-            continue
-        for i in range(grown.shape[0] - 1, -1, -1):
-            if grown[i, j]:
-                if r0 + i + 1 > sky[cj]:
-                    sky[cj] = r0 + i + 1
+    for i in range(rows):
+        j = 0
+        while j < cols:
+            if not mask[i, j]:
+                j += 1
+                continue
+            start = j
+            while j < cols and mask[i, j]:
+                j += 1
+            lo, hi = max(col + start - pad, 0), min(col + j + pad, W)
+            for ri in range(max(row + i - pad, 0), min(row + i + pad + 1, H)):
+                forbid[ri, lo:hi] = True
+    for j in range(cols):
+        top = -1
+        for i in range(rows - 1, -1, -1):
+            if mask[i, j]:
+                top = i
                 break
+        if top < 0:
+            continue
+        level = row + top + pad + 1
+        for cj in range(max(col + j - pad, 0), min(col + j + pad + 1, sky.shape[0])):
+            if level > sky[cj]:
+                sky[cj] = level
+    grown_rows, grown_cols = rows + 2 * pad, cols + 2 * pad
     R0 = max(r0, 0) // block
-    R1 = min((min(r0 + grown.shape[0], H) + block - 1) // block, coarse.shape[0])
+    R1 = min((min(r0 + grown_rows, H) + block - 1) // block, coarse.shape[0])
     C0 = max(c0, 0) // block
-    C1 = min((min(c0 + grown.shape[1], W) + block - 1) // block, coarse.shape[1])
+    C1 = min((min(c0 + grown_cols, W) + block - 1) // block, coarse.shape[1])
     _pool_rows(forbid, block, coarse, prefix, max_free, free_bits, R0, R1, C0, C1)
 
 
