@@ -58,11 +58,14 @@ ANGLE_WEIGHT = 16.0
 #: On charts of fewer than ``SMALL_CHART_FACES`` faces the refined map is kept only if its L2
 #: stretch is at most ``MAX_STRETCH_INCREASE`` above the starting map's (checked by the caller,
 #: :mod:`segparam.parameterize`). Larger charts that the conformal term stretches past the
-#: stretch target are split (``[split] max_stretch``, from the same size up), which is what
-#: brings fsaverage5's angle within 0.02 of xatlas's; small ones are not split, and the 40-face
-#: hemispheres of small spheres would go from L2 1.026 to 1.051 (measured, bench_atlas).
+#: stretch target are split (``[split] max_stretch``, from the same size up). This was 64 faces,
+#: which exempted the 40-face hemispheres of small spheres and most pieces of the realistic 2k
+#: brain (L2 1.026 / angle 1.244 and 1.035 / 1.205 in bench_atlas); now that the split stage
+#: solves small pieces in batches they are refined and split like any chart (1.005 / 1.093 with
+#: 1,203 charts, 1.007 / 1.077 with 108; xatlas 1.005 / 1.077 with 1,794, 1.021 / 1.057 with
+#: 134). 8 is the default ``[split] min_faces``: at the defaults the guard no longer applies.
 MAX_STRETCH_INCREASE = 0.01
-SMALL_CHART_FACES = 64
+SMALL_CHART_FACES = 8
 
 #: Iterations stop for a chart once one lowers its energy's excess over the isometry's (4) by
 #: less than this fraction (measured: on a saddle, a brain parcel and a spherical cap the energy

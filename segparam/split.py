@@ -63,7 +63,7 @@ from .parameterize import (
     solve_charts,
 )
 from .quality import ChartQuality, chart_quality
-from .refine import ANGLE_WEIGHT, SMALL_CHART_FACES
+from .refine import ANGLE_WEIGHT, SMALL_CHART_FACES, slim_refine
 from .segment import divide, face_affinity
 
 log = logging.getLogger(__name__)
@@ -76,14 +76,15 @@ __all__ = ["Chart", "ChartSet", "SplitConfig", "parameterize_charts", "project_c
 #: 8 charts (L2 1.0083), fsaverage5's cortex goes 57 -> 68 charts (L2 1.0143 -> 1.0092), the
 #: icosphere 2 -> 4 (1.061 -> 1.006); 1.01 costs fsaverage5 106 charts and 2-4x the stage time.
 MAX_STRETCH = 1.02
-#: Charts with fewer faces are not split for stretch: they are the pieces of small curved parts
-#: (the 40-face halves of 80-face spheres), which a split flattens only a little, at a solver
-#: call per piece: on 300 such spheres the target took the stage from 1.5 to 60+ s. The
-#: refinement keeps their stretch instead (:data:`segparam.refine.SMALL_CHART_FACES`).
+#: Charts with fewer faces are not split for stretch below ``SMALL_CHART_MAX_STRETCH``: at the
+#: default ``min_faces`` (8) these are the pieces the split stage projects onto their plane (and
+#: refines, :func:`_refine_projections`). It was 64, which kept the 40-face halves of small
+#: spheres at L2 1.026 (angle 1.244): a split per piece cost a solver call each then (300 spheres:
+#: 1.5 -> 60+ s); the pieces are solved in batches now (:func:`_solve_in_rounds`).
 STRETCH_MIN_FACES = SMALL_CHART_FACES
 #: ... unless their stretch is past this ceiling: a small chart this stretched is a bad map, not
-#: a curved part that a split would flatten little (the realistic 2k-face brain kept a 58-face
-#: chart at L2 7.6, Linf 70 under the exemption; the small spheres' halves sit at 1.03-1.05).
+#: a piece that a split would flatten little (the realistic 20k-face brain had a 7-face piece
+#: whose projection was bijective at L2 3.6, Linf 12; the refinement overlapped it: it is split).
 SMALL_CHART_MAX_STRETCH = 1.25
 #: Smaller meshes are parameterized in this process: starting workers costs about a second.
 PARALLEL_MIN_FACES = 100_000
@@ -558,7 +559,13 @@ def _bulk_charts(
         Vp, Fp, vc = part(proj)
         uv, has_normal = _project_union(Vp, Fp, vc, len(proj))
         q = charts_quality(Vp, Fp, uv, vc, len(proj))
-        ok = has_normal & (q["bijective"] | (c_small[proj] & (nf[cand][proj] == 1)))
+        uv, q = _refine_projections(Vp, Fp, vc, uv, q, has_normal & c_small[proj], cfg)
+        single = c_small[proj] & (nf[cand][proj] == 1)  # a triangle: always kept
+        fits = q["bijective"] & (
+            ~c_small[proj]
+            | _within_targets(q["angle_distortion"], q["l2_stretch"], nf[cand][proj], cfg)
+        )
+        ok = has_normal & (fits | single)
         planar_ok[proj[ok & c_planar[proj]]] = True
         emit(proj, vc, uv, q, ok & c_small[proj], "projection")
         emit(proj, vc, uv, q, ok & c_planar[proj], "planar")
@@ -592,6 +599,34 @@ def _bulk_charts(
         if bijective is not None:
             bijective[cand[take[q["bijective"]]]] = True
     return out
+
+
+def _refine_projections(
+    V: np.ndarray,
+    F: np.ndarray,
+    vert_chart: np.ndarray,
+    uv: np.ndarray,
+    q: dict[str, np.ndarray],
+    which: np.ndarray,
+    cfg: SplitConfig,
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """With ``refine="slim"``, the refinement (:func:`segparam.refine.slim_refine`) of the
+    bijective projections among the charts ``which`` of a disjoint union, kept where still
+    bijective: the projection of a small piece of a curved surface is a valid start, but its
+    stretch can be far from the least (a 4-face piece of the realistic 2k brain: L2 2.24)."""
+    go = which & q["bijective"] & (q["n_flipped"] == 0) & (q["n_degenerate"] == 0)
+    if cfg.refine != "slim" or not go.any():
+        return uv, q
+    n = len(go)
+    uv_s, moved = slim_refine(
+        V, F, uv, vert_chart=vert_chart, n_charts=n, charts=go, angle_weight=cfg.angle_weight
+    )
+    if not moved.any():
+        return uv, q
+    q_s = charts_quality(V, F, uv_s, vert_chart, n)
+    use = (moved > 0) & q_s["bijective"]
+    q = {k: np.where(use, q_s[k], q[k]) for k in q}
+    return np.where(use[vert_chart][:, None], uv_s, uv), q
 
 
 class _MeshAffinity:
@@ -814,7 +849,15 @@ def _try_piece(
         return None
     uv = project_chart(Vl, local_F)
     quality = chart_quality(Vl, local_F, uv)
-    if quality.bijective or len(faces) == 1:
+    if quality.bijective and len(faces) > 1 and cfg.refine == "slim":
+        uv_s, moved = slim_refine(Vl, local_F, uv, angle_weight=cfg.angle_weight)
+        q_s = chart_quality(Vl, local_F, uv_s) if moved[0] else None
+        if q_s is not None and q_s.bijective:
+            uv, quality = uv_s, q_s
+    if len(faces) == 1 or (
+        quality.bijective
+        and bool(_within_targets(quality.angle_distortion, quality.l2_stretch, len(faces), cfg))
+    ):
         return Chart(faces, vertices, local_F, uv, quality, src, depth, "projection")
     return None
 
