@@ -71,6 +71,7 @@ __all__ = [
     "Segmentation",
     "face_affinity",
     "divide",
+    "divide_many",
     "fiedler_bisect",
     "integrated_curvature",
     "segment",
@@ -341,6 +342,61 @@ def divide(W: sp.spmatrix, faces: np.ndarray, *, seed: int = 0) -> list[np.ndarr
     if n_comp > 1:
         return [faces[comp == k] for k in range(n_comp)]
     side = fiedler_bisect(sub, seed=seed)
+    return [faces[side], faces[~side]]
+
+
+def divide_many(
+    W: sp.spmatrix, groups: list[np.ndarray], *, seed: int = 0
+) -> list[list[np.ndarray]]:
+    """:func:`divide` of every face set in ``groups`` (each of 2+ faces, disjoint), the small
+    ones (up to ``DENSE_LIMIT`` faces) at once: one restriction of ``W``, one
+    connected-components pass, then a dense eigenproblem per group. The split stage cuts many
+    small pieces per round (the 600 halves of 300 small spheres): one :func:`divide` each cost
+    1.6 ms, mostly sparse-matrix overhead. Same pieces as :func:`divide`, in the same order.
+    """
+    out: list[list[np.ndarray] | None] = [None] * len(groups)
+    small = [i for i, g in enumerate(groups) if len(g) <= DENSE_LIMIT]
+    for i in sorted(set(range(len(groups))) - set(small)):  # loop over the few large ones
+        out[i] = divide(W, groups[i], seed=seed)
+    if small:
+        sizes = np.array([len(groups[i]) for i in small])
+        bounds = np.r_[0, np.cumsum(sizes)]
+        gid = np.repeat(np.arange(len(small)), sizes)
+        every = np.concatenate([groups[i] for i in small])
+        sub = W[every][:, every].tocoo()
+        keep = gid[sub.row] == gid[sub.col]  # no edge between two groups
+        sub = sp.csr_matrix(
+            (sub.data[keep], (sub.row[keep], sub.col[keep])), shape=(len(every), len(every))
+        )
+        _, comp = _cc(sub, directed=False)
+        d = np.asarray(sub.sum(axis=1)).ravel()
+        with one_blas_thread():
+            for j, i in enumerate(small):  # loop over small groups: one dense eigh each
+                a, b = int(bounds[j]), int(bounds[j + 1])
+                faces, c = groups[i], comp[a:b]
+                labels, first = np.unique(c, return_index=True)
+                if len(labels) > 1:  # components, numbered as connected_components numbers them
+                    out[i] = [faces[c == k] for k in labels[np.argsort(first)]]
+                    continue
+                out[i] = _halves(faces, sub[a:b, a:b], d[a:b])
+    return out  # type: ignore[return-value]
+
+
+def _halves(faces: np.ndarray, Wg: sp.spmatrix, d: np.ndarray) -> list[np.ndarray]:
+    """:func:`fiedler_bisect`'s halves of a small connected set (its affinity ``Wg``, row sums
+    ``d``), on a dense matrix: the same normalized Laplacian, entry for entry."""
+    m = len(faces)
+    if m <= 2:
+        side = np.arange(m) == 0
+        return [faces[side], faces[~side]]
+    d_safe = np.where(d > 0, d, 1.0)
+    dm = 1 / np.sqrt(d_safe)
+    L = np.eye(m) - (dm[:, None] * Wg.toarray()) * dm[None, :]
+    vec = scipy.linalg.eigh(L, subset_by_index=[0, 1])[1]
+    f = vec[:, 1] / np.sqrt(d_safe)
+    order = np.argsort(f, kind="stable")
+    side = np.zeros(m, dtype=bool)
+    side[order[: m // 2]] = True
     return [faces[side], faces[~side]]
 
 

@@ -64,7 +64,7 @@ from .parameterize import (
 )
 from .quality import ChartQuality, chart_quality
 from .refine import ANGLE_WEIGHT, SMALL_CHART_FACES, slim_refine
-from .segment import divide, face_affinity
+from .segment import divide, divide_many, face_affinity
 
 log = logging.getLogger(__name__)
 
@@ -641,11 +641,15 @@ class _MeshAffinity:
         self._V, self._F = V, F
         self._W: sp.csr_matrix | None = None
 
-    def restricted(self, faces: np.ndarray) -> sp.csr_matrix:
-        """The affinity among ``faces`` (mesh face indices), in their order."""
+    def mesh(self) -> sp.csr_matrix:
+        """The affinity of the whole mesh."""
         if self._W is None:
             self._W = face_affinity(self._V, self._F)
-        return self._W[faces][:, faces]
+        return self._W
+
+    def restricted(self, faces: np.ndarray) -> sp.csr_matrix:
+        """The affinity among ``faces`` (mesh face indices), in their order."""
+        return self.mesh()[faces][:, faces]
 
     def of_chart(self, faces: np.ndarray, *, now: bool) -> Callable[[], sp.csr_matrix]:
         """What :func:`_solve_source` calls for a chart's affinity when it must split the chart:
@@ -693,10 +697,10 @@ def _solve_in_rounds(
 
     Each round tries every piece left: the small ones (at most ``BATCH_MAX_VERTICES`` vertices)
     all at once through :func:`_bulk_charts`, the others one by one (:func:`_try_piece`); the
-    pieces that fail are bisected (:func:`segparam.segment.divide`) for the next round. The
-    pieces a split makes are mostly small, and one solver call each cost ~20 ms of set-up
-    (measured on the plate's hole walls and the cortex with a stretch target). A chart the bulk
-    pass already rejected (``bulk_rejected``) is bisected at once. Returns what
+    pieces that fail are bisected, all at once (:func:`segparam.segment.divide_many`), for the
+    next round. The pieces a split makes are mostly small, and one solver call each cost ~20 ms
+    of set-up (measured on the plate's hole walls and the cortex with a stretch target). A chart
+    the bulk pass already rejected (``bulk_rejected``) is bisected at once. Returns what
     :func:`_solve_source` returns, per chart: pieces in chart-local indices and units, sorted as
     its depth-first bisection would emit them.
     """
@@ -706,7 +710,6 @@ def _solve_in_rounds(
         pos[sources[src]] = np.arange(len(sources[src]))
     pieces: dict[int, list[tuple[tuple, Chart]]] = {src: [] for src in rest}
     first = dict.fromkeys(rest, False)
-    W: dict[int, sp.csr_matrix] = {}
     # (chart, faces in chart-local indices, depth, path of bisection choices, bulk tried it)
     pending = [(src, np.arange(len(sources[src])), 0, (), bool(bulk_rejected[src])) for src in rest]
     open_pieces = dict.fromkeys(rest, 1)
@@ -726,7 +729,7 @@ def _solve_in_rounds(
             got = _bulk_charts(V, F, sub_b, order, bounds, cfg, size, rejected)
             mapped = {batch[i]: got[i][0][0] for i in got}
         rejected_at = {batch[i] for i in np.flatnonzero(rejected)}
-        nxt = []
+        nxt, cut = [], []
         for k, (src, faces, depth, path, tried) in enumerate(pending):  # loop over pieces
             vertices, local_F = sub.of(src)
             status: dict = {}
@@ -747,14 +750,20 @@ def _solve_in_rounds(
             if chart is not None:
                 pieces[src].append((path, chart))
             else:
-                if src not in W:
-                    W[src] = affinity.of_chart(sources[src], now=False)()
-                parts = [p for p in divide(W[src], faces, seed=seed) if len(p)]
-                nxt.extend((src, p, depth + 1, (*path, i), False) for i, p in enumerate(parts))
-                open_pieces[src] += len(parts)
-            if open_pieces[src] == 0 and progress is not None:
-                done += 1
-                progress(done)
+                cut.append((src, faces, depth, path))
+        # The pieces that failed, all cut at once (in mesh face indices, back to chart-local).
+        groups = [sources[src][faces] for src, faces, _, _ in cut]
+        for (src, _, depth, path), parts in zip(
+            cut, divide_many(affinity.mesh(), groups, seed=seed) if cut else [], strict=True
+        ):  # loop over the pieces cut
+            parts = [pos[p] for p in parts if len(p)]
+            nxt.extend((src, p, depth + 1, (*path, i), False) for i, p in enumerate(parts))
+            open_pieces[src] += len(parts)
+        if progress is not None:
+            for src in dict.fromkeys(src for src, *_ in pending):  # charts of this round
+                if open_pieces[src] == 0:
+                    done += 1
+                    progress(done)
         pending = nxt
     return {src: ([c for _, c in sorted(pieces[src], key=lambda t: t[0])], first[src])
             for src in rest}  # fmt: skip
