@@ -362,3 +362,22 @@ def test_divide_many_cuts_as_divide_does():
         one = divide(W, g, seed=0)
         assert len(parts) == len(one)
         assert all(np.array_equal(a, b) for a, b in zip(parts, one, strict=True))
+
+
+def test_a_planar_region_is_one_chart_and_a_two_chart_open_region_is_tried_whole():
+    """The plate's top and bottom (planar, with holes) are one chart each whatever their share
+    of the curvature count; an open region whose share is two charts is left whole for the split
+    stage (a gently curved open patch whose curvature asks for two)."""
+    from segparam.mesh import face_normals
+
+    V, F = plate_with_holes()
+    seg = segment(V, F)
+    N = face_normals(V, F)
+    for side in (1.0, -1.0):  # top and bottom
+        faces = np.flatnonzero(np.abs(N[:, 2] - side) < 1e-9)
+        assert len(np.unique(seg.labels[faces])) == 1
+    V, F = tri_grid(24, 24)
+    V = np.c_[V[:, :2], 0.3 * np.sin(3 * V[:, 0]) * np.cos(3 * V[:, 1])]
+    two = segment(V, F, config=SegmentConfig(n_charts=2))
+    assert two.target_charts == 2 and two.n_charts == 1
+    assert segment(V, F, config=SegmentConfig(n_charts=3)).n_charts == 3
