@@ -59,16 +59,23 @@ ANGLE_WEIGHT = 16.0
 #: On charts of fewer than ``SMALL_CHART_FACES`` faces the refined map is kept only if its L2
 #: stretch is at most ``MAX_STRETCH_INCREASE`` above the starting map's (checked by the caller,
 #: :mod:`segparam.parameterize`). Larger charts that the conformal term stretches past the
-#: stretch target are split (``[split] max_stretch``, from the same size up), which is what
-#: brings fsaverage5's angle within 0.02 of xatlas's; small ones are not split, and the 40-face
-#: hemispheres of small spheres would go from L2 1.026 to 1.051 (measured, bench_atlas).
+#: stretch target are split (``[split] max_stretch``, from the same size up). This was 64 faces,
+#: which exempted the 40-face hemispheres of small spheres and most pieces of the realistic 2k
+#: brain (L2 1.026 / angle 1.244 and 1.035 / 1.205 in bench_atlas); now that the split stage
+#: solves small pieces in batches they are refined and split like any chart (1.005 / 1.093 with
+#: 1,203 charts, 1.007 / 1.077 with 108; xatlas 1.005 / 1.077 with 1,794, 1.021 / 1.057 with
+#: 134). 8 is the default ``[split] min_faces``: at the defaults the guard no longer applies.
 MAX_STRETCH_INCREASE = 0.01
-SMALL_CHART_FACES = 64
+SMALL_CHART_FACES = 8
 
 #: Iterations stop for a chart once one lowers its energy's excess over the isometry's (4) by
 #: less than this fraction (measured: on a saddle, a brain parcel and a spherical cap the energy
-#: is within 1e-4 of its limit after 5-10 iterations, where this rule stops).
-SLIM_TOL = 1e-2
+#: is within 1e-4 of its limit after 5-10 iterations, where this rule stops). 1e-2 until the
+#: small charts were refined too: the realistic 2k brain's 108 charts (mostly under 64 faces)
+#: stopped early, at angle 1.0775 (xatlas + 0.02 = 1.0773); 5e-3 gives 1.0770, fsaverage5 and
+#: brain-20k move by <= 0.0003, no stage time measurably more (parameterize_charts, CPU, loaded
+#: machine); 1e-3 gives 1.0754 on the brain at +25% of its stage time.
+SLIM_TOL = 5e-3
 #: ... or once that excess is below this: every triangle within ~0.1% of an isometry (a
 #: developable chart; the excess is about ``8 eps^2`` for singular values ``1 +- eps``).
 SLIM_FLOOR = 1e-5
