@@ -583,8 +583,9 @@ def _bulk_charts(
         Vs, Fs, vc = part(take)
         try:
             maps = solve_charts(
-                Vs, Fs, vc, tangent=cfg.tangent, refine=cfg.refine, angle_weight=cfg.angle_weight
-            )
+                Vs, Fs, vc, tangent=cfg.tangent, refine=cfg.refine, angle_weight=cfg.angle_weight,
+                slim_below=_stretch_limit(nf[cand][take], cfg),
+            )  # fmt: skip
         except (InvalidMeshError, np.linalg.LinAlgError) as exc:  # not expected: one by one
             log.debug("batched solver failed (%s); solving %d charts one by one", exc, len(take))
             return out
@@ -672,10 +673,17 @@ def _within_targets(angle, l2, n_faces, cfg: SplitConfig):
     if cfg.max_distortion is not None:
         ok &= np.asarray(angle) <= cfg.max_distortion
     if cfg.max_stretch is not None:
-        small = np.asarray(n_faces) < STRETCH_MIN_FACES
-        limit = np.where(small, max(cfg.max_stretch, SMALL_CHART_MAX_STRETCH), cfg.max_stretch)
-        ok &= np.asarray(l2) <= limit
+        ok &= np.asarray(l2) <= _stretch_limit(n_faces, cfg)
     return ok
+
+
+def _stretch_limit(n_faces, cfg: SplitConfig):
+    """The L2 stretch charts of these face counts must meet (``max_stretch``, or
+    ``SMALL_CHART_MAX_STRETCH`` under ``STRETCH_MIN_FACES`` faces), None without a target."""
+    if cfg.max_stretch is None:
+        return None
+    small = np.asarray(n_faces) < STRETCH_MIN_FACES
+    return np.where(small, max(cfg.max_stretch, SMALL_CHART_MAX_STRETCH), cfg.max_stretch)
 
 
 def _solve_in_rounds(
@@ -838,7 +846,7 @@ def _try_piece(
         try:
             result = parameterize_chart(
                 Vl, local_F, method=cfg.method, tangent=cfg.tangent, seed=seed, refine=cfg.refine,
-                angle_weight=cfg.angle_weight,
+                angle_weight=cfg.angle_weight, slim_below=_stretch_limit(len(faces), cfg),
             )  # fmt: skip
         except InvalidMeshError as exc:  # not a disk (e.g. a half that pinches): split it
             log.debug("chart %d depth %d: %s", src, depth, exc)
