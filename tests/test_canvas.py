@@ -183,3 +183,61 @@ def test_turned_footprints_and_their_profiles_match_numpy() -> None:
             assert (rr, cc) == want.shape and np.array_equal(prof[:cc], bottom)
             per_row = want.sum(axis=1)
             assert np.isclose(y, per_row @ np.arange(len(per_row)) / per_row.sum())
+
+
+def _star(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A star-shaped fan of n outer points around the origin, faces counter-clockwise."""
+    theta = np.sort(rng.uniform(0, 2 * np.pi, n))
+    radius = rng.uniform(0.4, 1.0, n)
+    uv = np.vstack([[0.0, 0.0], np.column_stack([radius * np.cos(theta), radius * np.sin(theta)])])
+    j = np.arange(n)
+    return uv, np.column_stack([np.zeros(n, dtype=np.int64), 1 + j, 1 + (j + 1) % n])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_fill_in_the_profile_pass_matches_the_fill_then_the_profiles(seed: int) -> None:
+    # a trial fills a footprint inside its profile pass (_filled_profiles on the outline's
+    # winding increments); it must give _fill_into's texels and _profiles' numbers
+    from segparam import raster
+
+    rng = np.random.default_rng(seed)
+    for _ in range(5):
+        uv, F = _star(int(rng.integers(5, 40)), rng)
+        B = raster.boundary_edges(F)
+        P = uv * rng.uniform(1, 20)
+        P = P - P.min(axis=0) + rng.uniform(0, 1, 2)
+        if rng.random() < 0.5:  # vertices on texel lines, the delicate cases
+            P = np.round(P * 2) / 2
+        rows, cols = (int(v) for v in np.floor(P.max(axis=0))[::-1] + 2)
+        want = raster.fill_outline(P, B, (rows, cols), 1e-4)
+        got = np.zeros((rows, cols), dtype=bool)
+        diff = raster.outline_winding(P, B, 1e-4, got)
+        profiles = canvas._filled_profiles(got, diff, rows, cols)
+        assert np.array_equal(got, want)
+        for a, b in zip(profiles, canvas._profiles(want, rows, cols), strict=True):
+            np.testing.assert_array_equal(a, b)
+
+
+def test_hull_boxes_of_many_charts_match_one_chart_at_a_time_and_brute_force() -> None:
+    # the packer measures the minimum-area boxes of all charts over pack._SMALL_HULL points in
+    # one padded call
+    from segparam import pack
+    from segparam.errors import InvalidMeshError
+
+    rng = np.random.default_rng(5)
+    sets = [rng.normal(size=(int(n), 2)) * rng.uniform(0.1, 5, 2) for n in rng.integers(13, 60, 9)]
+    sets.append(np.array([[0, 0], [3, 0], [3, 1], [0, 1], [1, 0.5]] * 3, dtype=float))  # a box
+    angle, fill = pack._hull_boxes(sets, np.arange(len(sets)))
+
+    def box(uv: np.ndarray, t: float) -> float:
+        c, s = np.cos(t), np.sin(t)
+        return float(np.ptp(uv @ np.array([[c, -s], [s, c]]).T, axis=0).prod())
+
+    for k, uv in enumerate(sets):
+        one = pack._hull_boxes([uv])
+        assert (angle[k], fill[k]) == (one[0][0], one[1][0])
+        least = min(box(uv, t) for t in np.radians(np.arange(0, 180, 0.25)))
+        assert box(uv, angle[k]) <= least * (1 + 1e-9)
+    assert fill[-1] == pytest.approx(1.0)
+    with pytest.raises(InvalidMeshError, match="chart 1: chart uv points span no area"):
+        pack._hull_boxes([sets[0], np.array([[0, 0], [1, 1], [2, 2.0]] * 5)], np.arange(2))

@@ -275,3 +275,29 @@ def test_a_stretched_projection_is_refined():
     (slim,) = parameterize_charts(V, F, labels).charts
     assert slim.method == "projection" and slim.quality.bijective
     assert slim.quality.l2_stretch < 1.001 and slim.quality.angle_distortion < 1.01
+
+
+def test_slim_below_returns_the_arap_map_of_a_chart_over_the_target() -> None:
+    # The split stage passes its stretch target: a map already past it before the refinement is
+    # returned as ARAP left it (one chart, and the same chart among others in a batch).
+    V, F = spherical_cap()
+    arap = parameterize_chart(V, F, refine="arap")
+    slim = parameterize_chart(V, F, refine="slim")
+    assert arap.quality.l2_stretch > 1.0005 and not np.allclose(slim.uv, arap.uv)
+    over = parameterize_chart(V, F, refine="slim", slim_below=arap.quality.l2_stretch * 0.999)
+    np.testing.assert_array_equal(over.uv, arap.uv)
+    under = parameterize_chart(V, F, refine="slim", slim_below=arap.quality.l2_stretch * 1.001)
+    np.testing.assert_array_equal(under.uv, slim.uv)
+
+    small_V, small_F = spherical_cap(8, 8, extent=1.2)
+    Vb = np.vstack([small_V, small_V + [5.0, 0, 0]])
+    Fb = np.vstack([small_F, small_F + len(small_V)])
+    vc = np.repeat([0, 1], len(small_V))
+    both = solve_charts(Vb, Fb, vc, refine="slim")
+    before = solve_charts(Vb, Fb, vc, refine="arap")
+    limit = np.array([0.0, np.inf])  # chart 0 is over its limit, chart 1 under
+    mixed = solve_charts(Vb, Fb, vc, refine="slim", slim_below=limit)
+    n = len(small_V)
+    np.testing.assert_allclose(mixed.uv[:n], before.uv[:n])
+    np.testing.assert_allclose(mixed.uv[n:], both.uv[n:])
+    assert not np.allclose(both.uv[:n], before.uv[:n])
