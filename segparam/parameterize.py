@@ -20,7 +20,9 @@ the chart closest to isometric, and :func:`orient` keeps the input winding (no m
 Then (not in the paper, on by default, ``refine="none"`` turns it off) :func:`arap_refine` runs a
 few as-rigid-as-possible iterations from that map and keeps them only if they do not make the map
 worse: measured on folded cortex-like parcels, it turns most of the eigenmap's few boundary flips
-into bijective maps and brings the median angle distortion close to 1 (see BENCHMARKS.md).
+into bijective maps and brings the median angle distortion close to 1 (see BENCHMARKS.md). A
+refined map that is still not bijective is refined again from the next pairs of eigenvectors
+(``FALLBACK_PAIRS``).
 ``refine="slim"`` (the pipeline's default, ``[split] refine``) then runs the flip-free
 distortion refinement of :mod:`segparam.refine` on a map with no flipped triangle.
 
@@ -918,7 +920,10 @@ class HessianSolver:
         for angle distortion), kept when bijective (and, on charts of fewer than
         ``SMALL_CHART_FACES`` faces, when its L2 stretch is at most ``MAX_STRETCH_INCREASE``
         above the map's before).
-        ``refine="none"`` returns the paper's map as it is.
+        ``refine="none"`` returns the paper's map as it is. With a refinement, a map that still
+        is not bijective is refined again from the next pairs of eigenvectors of ``K``
+        (``FALLBACK_PAIRS``, first bijective kept): the paper's pair can fold a chart over
+        globally, which the refinement cannot undo.
         """
         seed = check_int("seed", seed, low=0)
         refine = check_choice("refine", refine, REFINES)
@@ -990,7 +995,8 @@ def parameterize_chart(
         ``"arap"`` (default): as-rigid-as-possible iterations from the eigenmap, kept only when
         they do not make the map worse (:meth:`HessianSolver.solve`); ``"slim"``: the same, then
         the flip-free symmetric Dirichlet refinement (:mod:`segparam.refine`), kept when
-        bijective; ``"none"``: the paper's map.
+        bijective; ``"none"``: the paper's map. With ``"arap"`` or ``"slim"`` a map that is not
+        bijective is refined again from the next eigenvector pairs (``FALLBACK_PAIRS``).
     angle_weight : float
         ``refine="slim"`` only: weight (>= 0) of the conformal term added to the symmetric
         Dirichlet energy (:func:`segparam.refine.slim_refine`); higher trades L2 stretch for
