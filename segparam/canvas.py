@@ -43,7 +43,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from segparam.raster import _fill_into, _raster_into, dilate_kernel
+from segparam.raster import _raster_into, outline_winding
 
 REST = 0
 HOLES = 1
@@ -108,16 +108,30 @@ def turned(base, rows, cols, k, out):  # pragma: no cover - compiled
 def _profiles(base, rows, cols):  # pragma: no cover - compiled
     """One pass over a footprint: per column its lowest and highest row, per row its left-most
     and right-most column (`_EMPTY` / -1 where empty), and its centroid (row, col)."""
+    return _filled_profiles(base, np.zeros((0, 0), dtype=np.int32), rows, cols)
+
+
+@njit(cache=True, nogil=True)
+def _filled_profiles(base, diff, rows, cols):  # pragma: no cover - compiled
+    """`_profiles`, filling the footprint in the same pass when `diff` holds the winding
+    increments of its outline (`raster.outline_winding`; an empty `diff`: nothing to fill):
+    one pass over the texels instead of two."""
     low = np.full(cols, _EMPTY, dtype=np.int64)
     high = np.full(cols, -1, dtype=np.int64)
     left = np.full(rows, _EMPTY, dtype=np.int64)
     right = np.full(rows, -1, dtype=np.int64)
+    filling = diff.shape[0] > 0
     total = 0
     sum_r = 0
     sum_c = 0
     for i in range(rows):
         n = 0
+        w = 0
         for j in range(cols):
+            if filling:
+                w += diff[i, j]
+                if w > 0:
+                    base[i, j] = True
             if base[i, j]:
                 n += 1
                 sum_c += j
@@ -246,29 +260,36 @@ def fits(forbid, height, width, mask, rows, cols, row, col):  # pragma: no cover
 
 
 @njit(cache=True, nogil=True)
-def _leading_edge(mask, rows, cols, di, dj):  # pragma: no cover - compiled
-    """Cells (i, j) of the footprint whose neighbour (i + di, j + dj) is not in it: the texels
-    that a one-texel move by (di, dj) newly covers. (Counted first: a rows * cols buffer would
-    be megabytes per call for a large chart. The test is written out in both passes: as a
-    shared compiled helper it made every packing 50% slower.)"""
-    n = 0
+def _leading_edges(mask, rows, cols):  # pragma: no cover - compiled
+    """The footprint's lower and left edges: its cells (i, j) whose neighbour below (i - 1, j),
+    respectively to the left (i, j - 1), is not in it, i.e. the texels that a one-texel move
+    down (left) newly covers, each list in row-major order. Two passes over the mask for both
+    lists (count, then fill: a rows * cols buffer would be megabytes for a large chart)."""
+    n_down = 0
+    n_left = 0
     for i in range(rows):
         for j in range(cols):
             if mask[i, j]:
-                ni, nj = i + di, j + dj
-                if ni < 0 or nj < 0 or ni >= rows or nj >= cols or not mask[ni, nj]:
-                    n += 1
-    edge = np.empty((n, 2), dtype=np.int64)
-    n = 0
+                if i == 0 or not mask[i - 1, j]:
+                    n_down += 1
+                if j == 0 or not mask[i, j - 1]:
+                    n_left += 1
+    down = np.empty((n_down, 2), dtype=np.int64)
+    left = np.empty((n_left, 2), dtype=np.int64)
+    n_down = 0
+    n_left = 0
     for i in range(rows):
         for j in range(cols):
             if mask[i, j]:
-                ni, nj = i + di, j + dj
-                if ni < 0 or nj < 0 or ni >= rows or nj >= cols or not mask[ni, nj]:
-                    edge[n, 0] = i
-                    edge[n, 1] = j
-                    n += 1
-    return edge
+                if i == 0 or not mask[i - 1, j]:
+                    down[n_down, 0] = i
+                    down[n_down, 1] = j
+                    n_down += 1
+                if j == 0 or not mask[i, j - 1]:
+                    left[n_left, 0] = i
+                    left[n_left, 1] = j
+                    n_left += 1
+    return down, left
 
 
 @njit(cache=True, nogil=True)
@@ -286,8 +307,7 @@ def slide(forbid, mask, rows, cols, row, col, max_steps):  # pragma: no cover - 
 
     Only the texels a move newly covers are tested: the footprint's lower (left) edges.
     """
-    down = _leading_edge(mask, rows, cols, -1, 0)
-    left = _leading_edge(mask, rows, cols, 0, -1)
+    down, left = _leading_edges(mask, rows, cols)
     return _slide_edges(forbid, down, left, row, col, max_steps)
 
 
@@ -313,31 +333,42 @@ def _slide_edges(forbid, down, left, row, col, max_steps):  # pragma: no cover -
 def place(
     forbid, sky, coarse, prefix, max_free, free_bits, block, mask, rows, cols, row, col, pad
 ):  # pragma: no cover - compiled
-    """Forbid the footprint dilated by `pad`, raise the skyline to its top, refresh the pool."""
-    grown = dilate_kernel(mask[:rows, :cols], pad)
+    """Forbid the footprint dilated by `pad`, raise the skyline to its top, refresh the pool.
+
+    Written straight into the canvas, run by run (no dilated copy): a run of footprint texels
+    in a row forbids the rectangle `pad` texels around it, and a column's skyline rises to
+    `pad` above the highest footprint texel within `pad` columns of it."""
     r0, c0 = row - pad, col - pad
     H, W = forbid.shape
-    for i in range(grown.shape[0]):
-        ri = r0 + i
-        if ri < 0 or ri >= H:
-            continue
-        for j in range(grown.shape[1]):
-            cj = c0 + j
-            if 0 <= cj < W and grown[i, j]:
-                forbid[ri, cj] = True
-    for j in range(grown.shape[1]):
-        cj = c0 + j
-        if cj < 0 or cj >= sky.shape[0]:
-            continue
-        for i in range(grown.shape[0] - 1, -1, -1):
-            if grown[i, j]:
-                if r0 + i + 1 > sky[cj]:
-                    sky[cj] = r0 + i + 1
+    for i in range(rows):
+        j = 0
+        while j < cols:
+            if not mask[i, j]:
+                j += 1
+                continue
+            start = j
+            while j < cols and mask[i, j]:
+                j += 1
+            lo, hi = max(col + start - pad, 0), min(col + j + pad, W)
+            for ri in range(max(row + i - pad, 0), min(row + i + pad + 1, H)):
+                forbid[ri, lo:hi] = True
+    for j in range(cols):
+        top = -1
+        for i in range(rows - 1, -1, -1):
+            if mask[i, j]:
+                top = i
                 break
+        if top < 0:
+            continue
+        level = row + top + pad + 1
+        for cj in range(max(col + j - pad, 0), min(col + j + pad + 1, sky.shape[0])):
+            if level > sky[cj]:
+                sky[cj] = level
+    grown_rows, grown_cols = rows + 2 * pad, cols + 2 * pad
     R0 = max(r0, 0) // block
-    R1 = min((min(r0 + grown.shape[0], H) + block - 1) // block, coarse.shape[0])
+    R1 = min((min(r0 + grown_rows, H) + block - 1) // block, coarse.shape[0])
     C0 = max(c0, 0) // block
-    C1 = min((min(c0 + grown.shape[1], W) + block - 1) // block, coarse.shape[1])
+    C1 = min((min(c0 + grown_cols, W) + block - 1) // block, coarse.shape[1])
     _pool_rows(forbid, block, coarse, prefix, max_free, free_bits, R0, R1, C0, C1)
 
 
@@ -434,9 +465,14 @@ def coarse_runs(mask, rows, cols, block):  # pragma: no cover - compiled
     cc = (cols + block - 1) // block
     cm = np.zeros((cr, cc), dtype=np.bool_)
     for i in range(rows):
-        for j in range(cols):
-            if mask[i, j]:
-                cm[i // block, j // block] = True
+        R = i // block
+        for C in range(cc):
+            if cm[R, C]:  # already hit by an earlier texel row of this block row
+                continue
+            for j in range(C * block, min((C + 1) * block, cols)):
+                if mask[i, j]:
+                    cm[R, C] = True
+                    break
     runs = np.empty((cr * ((cc + 1) // 2), 3), dtype=np.int64)
     n = 0
     widest = 0
@@ -590,6 +626,7 @@ def trial(
     _sky_minima(sky, sky_min, 0, width)
     result = np.full((len(entry_ptr) - 1, 6), -1, dtype=np.int64)
     need = 0
+    no_fill = np.zeros((0, 0), dtype=np.int32)
     for t in range(len(order)):
         i = order[t]
         e0 = entry_ptr[i]
@@ -626,11 +663,12 @@ def trial(
                 P[v, 0] = Q[q_ptr[e] + v, 0] * s + off0
                 P[v, 1] = Q[q_ptr[e] + v, 1] * s + off1
             base = flat[base_off[a] : base_off[a + 1]].reshape((n1, n0))
-            if fill[i]:
-                _fill_into(P, El, eps, base)
+            if fill[i]:  # the outline's edges now, the inside in the profiles' pass
+                diff = outline_winding(P, El, eps, base)
             else:
                 _raster_into(P, El, eps, base)
-            low, high, left, right, cy0, cx0 = _profiles(base, n1, n0)
+                diff = no_fill
+            low, high, left, right, cy0, cx0 = _filled_profiles(base, diff, n1, n0)
             first = n_kept
             for k in range(turns):
                 r, c, y = _turned_bottom(
@@ -671,9 +709,10 @@ def trial(
             n_s = 0
             for o in range(n_kept):
                 r, c = shape[o, 0], shape[o, 1]
-                got, rr, cc = resting(
-                    bottoms[o], c, sky, sky_min, height - pad - r, per_orientation, samples
-                )
+                top = height - pad - r
+                if n_s == n_starts:  # a start must come no higher than the worst one kept
+                    top = min(top, int(np.floor(s_key[n_starts - 1] - cy[o])))
+                got, rr, cc = resting(bottoms[o], c, sky, sky_min, top, per_orientation, samples)
                 for g in range(got):
                     key = rr[g] + cy[o]
                     pos = n_s
@@ -734,12 +773,10 @@ def trial(
                 used += 1
             q = slot[o]
             r, c = shape[o, 0], shape[o, 1]
-            # a resting position clears the skyline in every column, so it always fits
-            if rule != REST and not fits(forbid, height, width, masks[q], r, c, row, col):
-                continue
+            # every start fits by construction: a resting position clears the skyline in every
+            # column, and a hole's coarse footprint meets no coarse cell holding a forbidden texel
             if not has_edges[q]:
-                downs[q] = _leading_edge(masks[q], r, c, -1, 0)
-                lefts[q] = _leading_edge(masks[q], r, c, 0, -1)
+                downs[q], lefts[q] = _leading_edges(masks[q], r, c)
                 has_edges[q] = True
             row, col = _slide_edges(forbid, downs[q], lefts[q], row, col, slide_steps)
             key = row + cy[o]

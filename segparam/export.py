@@ -179,7 +179,7 @@ def render_uv_layout(
     from PIL import Image, ImageDraw
 
     from .mesh import boundary_loops, group_by_label
-    from .raster import rasterize_footprint
+    from .raster import rasterize_triangles
 
     labels = np.zeros(len(F), dtype=np.int64) if labels is None else np.asarray(labels)
     n = int(labels.max()) + 1
@@ -192,18 +192,20 @@ def render_uv_layout(
     for k, faces in enumerate(groups):  # loop over charts
         if len(faces) == 0:
             continue
-        mask = rasterize_footprint(uv, F[faces], resolution=size, eps=0.0)
-        box = _texel_box(P[F[faces].ravel()], size)  # the chart's texels all lie in this box
-        np.copyto(chart[box], k + 1, where=mask[box])
+        rows, cols = _texel_box(P[F[faces].ravel()], size)  # the chart's texels all lie in it
+        corner = np.array([cols.start, rows.start], dtype=np.float64)  # exact: 0 <= it <= P
+        shape = (rows.stop - rows.start, cols.stop - cols.start)
+        mask = rasterize_triangles(P - corner, F[faces], shape, 0.0)
+        np.copyto(chart[rows, cols], k + 1, where=mask)
     image = Image.fromarray(lut.take(chart[::-1], axis=0))  # row 0 is v = 0: flip, v grows up
     if outline:
         draw = ImageDraw.Draw(image)
         P = uv * size
         P[:, 1] = size - P[:, 1]
-        for faces in groups:  # loop over charts, then over their few boundary loops
-            for loop in boundary_loops(F[faces]):
-                pts = P[np.r_[loop, loop[:1]]]
-                draw.line(list(map(tuple, pts.tolist())), fill=(40, 40, 40), width=1)
+        # the loops of all charts at once: one colour, so the order they are drawn in is moot
+        for loop in boundary_loops(np.asarray(F)):  # loop over boundary loops
+            pts = P[np.r_[loop, loop[:1]]]
+            draw.line(list(map(tuple, pts.tolist())), fill=(40, 40, 40), width=1)
     return image
 
 

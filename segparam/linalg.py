@@ -85,6 +85,12 @@ def _cholmod_solver(A: sp.csc_matrix) -> Callable[[np.ndarray], np.ndarray]:
     )
     factor = cholmod.symbolic(M, uplo="L")
     cholmod.numeric(M, factor)
+    return _factor_solver(factor)
+
+
+def _factor_solver(factor) -> Callable[[np.ndarray], np.ndarray]:
+    """``B -> A^-1 B`` with a numeric CHOLMOD factor of A (cvxopt)."""
+    from cvxopt import cholmod, matrix
 
     def solve(B: np.ndarray) -> np.ndarray:
         X = matrix(np.asarray(B, dtype=np.float64).reshape(len(B), -1))
@@ -92,6 +98,57 @@ def _cholmod_solver(A: sp.csc_matrix) -> Callable[[np.ndarray], np.ndarray]:
         return np.array(X).reshape(np.shape(B))
 
     return solve
+
+
+class FixedPattern:
+    """A sparse symmetric positive definite matrix whose pattern stays while its values change,
+    factorized again for each new set of values: the fill-reducing order and the symbolic
+    factorization are computed once (CHOLMOD through cvxopt), each refactorization is numeric
+    only, and the values are summed into the pattern's slots without sorting.
+
+    For iterations that solve one system per step (:func:`segparam.refine.slim_refine`): on a
+    40k-row chart system the symbolic step cost as much as the numeric one, and building a
+    scipy matrix and its lower triangle as much again.
+
+    Parameters
+    ----------
+    rows, cols : (k,) int ndarrays
+        Entries of the lower triangle (``rows >= cols``), repeats allowed (they are summed).
+    n : int
+        Size of the matrix.
+    """
+
+    def __init__(self, rows: np.ndarray, cols: np.ndarray, n: int) -> None:
+        key = np.asarray(cols, dtype=np.int64) * n + np.asarray(rows, dtype=np.int64)
+        unique, self._slot = np.unique(key, return_inverse=True)  # column-major: CSC order
+        self._rows, self._cols = unique % n, unique // n
+        self.n = int(n)
+        self._symbolic = None
+        self._matrix = None  # the cvxopt matrix: its values are replaced, its pattern kept
+
+    def solver(self, values: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """Factorize the matrix with these entry values (aligned with the constructor's
+        entries); return ``B -> A^-1 B``, valid until the next call. Falls back to
+        :func:`spd_solver` when cvxopt is missing or the matrix is not numerically positive
+        definite."""
+        data = np.bincount(self._slot, weights=values, minlength=len(self._rows))
+        try:
+            from cvxopt import cholmod, matrix, spmatrix
+
+            if self._matrix is None:
+                self._matrix = spmatrix(
+                    matrix(data), matrix(self._rows.astype(np.intp)),
+                    matrix(self._cols.astype(np.intp)), (self.n, self.n),
+                )  # fmt: skip
+                self._symbolic = cholmod.symbolic(self._matrix, uplo="L")
+            else:  # the values in the matrix's own (column-major) order: the unique keys'
+                self._matrix.V = matrix(data)
+            cholmod.numeric(self._matrix, self._symbolic)
+        except (ImportError, ArithmeticError) as exc:
+            log.debug("no Cholesky refactorization (%r); factorizing anew", exc)
+            lower = sp.csc_matrix((data, (self._rows, self._cols)), shape=(self.n, self.n))
+            return spd_solver(lower + sp.tril(lower, -1).T)
+        return _factor_solver(self._symbolic)
 
 
 def smallest_eigenpairs(

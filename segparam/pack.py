@@ -318,18 +318,8 @@ def _min_area_angle(uv: np.ndarray) -> tuple[float, float]:
     The fill (convex hull area / box area, 1 for a rectangle) is what tells the packer that a
     chart is a rectangle.
     """
-    centred = uv - uv.mean(axis=0)
-    try:
-        hull = ConvexHull(centred)
-    except QhullError as exc:
-        raise InvalidMeshError(
-            f"chart uv points span no area ({uv.shape[0]} points are collinear or coincide)"
-        ) from exc
-    H = centred[hull.vertices]  # counter-clockwise
-    d = np.roll(H, -1, axis=0) - H
-    theta = np.arctan2(d[:, 1], d[:, 0])
-    angle, box = _boxes_along(H[None], theta[None], np.ones((1, len(theta)), dtype=bool))
-    return float(angle[0]), float(hull.volume / box[0])
+    angle, fill = _hull_boxes([uv])
+    return float(angle[0]), float(fill[0])
 
 
 def _boxes_along(
@@ -468,20 +458,13 @@ def _min_area_angles(U: np.ndarray, nv: np.ndarray, voff: np.ndarray):
     Charts of up to `_SMALL_HULL` points are done together, a group per point count: a directed
     pair (i, j) is a hull edge when no point lies right of it and the points on its line lie
     between i and j, which gives the hull without qhull; the boxes of the hull edges' directions
-    are measured by `_boxes_along`, as in `_min_area_angle`. Larger charts go through
-    `_min_area_angle` one by one.
+    are measured by `_boxes_along`, as in `_min_area_angle`. Larger charts get a qhull hull
+    each and their boxes together (`_hull_boxes`).
     """
     n = len(nv)
     angle, fill = np.zeros(n), np.zeros(n)
-    for size in np.unique(nv):  # loop over the few distinct point counts of small charts
+    for size in np.unique(nv[nv <= _SMALL_HULL]):  # loop over the few small point counts
         idx = np.flatnonzero(nv == size)
-        if size > _SMALL_HULL:
-            for i in idx:  # loop over large charts
-                try:
-                    angle[i], fill[i] = _min_area_angle(U[voff[i] : voff[i] + size])
-                except InvalidMeshError as exc:
-                    raise InvalidMeshError(f"chart {i}: {exc}") from exc
-            continue
         P = U[voff[idx][:, None] + np.arange(size)]  # (c, n, 2)
         P = P - P.mean(axis=1, keepdims=True)
         ii, jj = np.nonzero(~np.eye(size, dtype=bool))  # directed pairs
@@ -504,7 +487,45 @@ def _min_area_angles(U: np.ndarray, nv: np.ndarray, voff: np.ndarray):
             )
         angle[idx] = a
         fill[idx] = area / best_area
+    large = np.flatnonzero(nv > _SMALL_HULL)
+    if len(large):
+        angle[large], fill[large] = _hull_boxes(
+            [U[voff[i] : voff[i] + nv[i]] for i in large], large
+        )
     return angle, fill
+
+
+def _hull_boxes(
+    points: list[np.ndarray], ids: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """`_min_area_angle` of several point sets: a qhull hull each, then the boxes of all hulls'
+    edge directions in one `_boxes_along` call (hulls padded with their first vertex, whose
+    directions are not valid). The same angles and fills as one `_min_area_angle` per set, at a
+    fifth of the cost (the calipers on small arrays cost 0.2 ms a chart; 600 charts: 0.15 s).
+    `ids` name the sets (charts) in errors."""
+    hulls, areas = [], np.empty(len(points))
+    for k, uv in enumerate(points):  # loop over charts: qhull
+        centred = uv - uv.mean(axis=0)
+        try:
+            hull = ConvexHull(centred)
+        except QhullError as exc:
+            where = "" if ids is None else f"chart {ids[k]}: "
+            raise InvalidMeshError(
+                f"{where}chart uv points span no area ({uv.shape[0]} points are collinear or "
+                "coincide)"
+            ) from exc
+        hulls.append(centred[hull.vertices])  # counter-clockwise
+        areas[k] = hull.volume
+    sizes = np.array([len(H) for H in hulls])
+    slot = np.arange(sizes.max())
+    valid = slot[None, :] < sizes[:, None]
+    H = np.concatenate(hulls)
+    start = np.r_[0, np.cumsum(sizes)[:-1]]
+    P = H[start[:, None] + np.where(valid, slot[None, :], 0)]  # (c, hmax, 2), padded
+    d = H[start[:, None] + (slot[None, :] + 1) % sizes[:, None]] - P  # edge k: vertex k -> k+1
+    theta = np.arctan2(d[..., 1], d[..., 0])
+    angle, box = _boxes_along(P, theta, valid)
+    return angle, areas / box
 
 
 def _outlines(G: np.ndarray, fchart: np.ndarray, voff: np.ndarray, ok: np.ndarray, n_points: int):

@@ -47,6 +47,7 @@ from .errors import InvalidMeshError, check_choice, check_int, check_number
 from .linalg import one_blas_thread, smallest_eigenpairs, spd_solver
 from .mesh import (
     boundary_edges,
+    boundary_loops,
     check_mesh,
     edges,
     face_areas,
@@ -835,27 +836,28 @@ def _other_pairs(V: np.ndarray, F: np.ndarray, K, frames: np.ndarray, *, seed: i
         yield orient(isometric_fit(V, F, U[:, [i, j]], frames), F)
 
 
-def _refine_map(V, F, uv, frames, refine, refine_iterations, angle_weight):
+def _refine_map(V, F, uv, frames, refine, refine_iterations, angle_weight, boundary=None):
     """The refinement of :meth:`HessianSolver.solve` from the start map ``uv`` of one chart (in
-    units of its typical edge): returns (uv, quality, refined)."""
+    units of its typical edge): returns (uv, quality, refined). ``boundary``: the chart's
+    boundary edges and loops, when the caller has them (see :func:`chart_quality`)."""
     refined = False
     quality = None
     steps = 0
     if refine in ("arap", "slim"):
         uv_r, steps = _arap(V, F, uv, iterations=refine_iterations, inv_frames=frames)
     if steps:
-        q_r = chart_quality(V, F, uv_r, frames)
+        q_r = chart_quality(V, F, uv_r, frames, boundary=boundary)
         if q_r.bijective:
             uv, quality, refined = uv_r, q_r, True
         else:
-            quality = chart_quality(V, F, uv, frames)
+            quality = chart_quality(V, F, uv, frames, boundary=boundary)
             if not quality.bijective and q_r.n_flipped < quality.n_flipped:
                 uv, quality, refined = uv_r, q_r, True
     if quality is None:
-        quality = chart_quality(V, F, uv, frames)
+        quality = chart_quality(V, F, uv, frames, boundary=boundary)
     if refine == "slim" and quality.n_flipped == 0 and quality.n_degenerate == 0:
         uv_s, moved = slim_refine(V, F, uv, inv_frames=frames, angle_weight=angle_weight)
-        q_s = chart_quality(V, F, uv_s, frames) if moved[0] else None
+        q_s = chart_quality(V, F, uv_s, frames, boundary=boundary) if moved[0] else None
         if (
             q_s is not None
             and q_s.bijective
@@ -937,9 +939,11 @@ class HessianSolver:
         Y, values = hessian_eigenmap(self.K, seed=seed, guess=guess)
         t1 = time.perf_counter()
         frames = inverse_frames(triangle_frames(self._Vn, self.F))  # shared by every measure
+        B = boundary_edges(self.F)
+        boundary = (B, boundary_loops(self.F, boundary=B))  # F's alone: once for every measure
         uv = orient(isometric_fit(self._Vn, self.F, Y, frames), self.F)
         t2 = time.perf_counter()
-        args = (frames, refine, refine_iterations, angle_weight)
+        args = (frames, refine, refine_iterations, angle_weight, boundary)
         uv, quality, refined = _refine_map(self._Vn, self.F, uv, *args)
         if not quality.bijective and refine != "none":
             for uv_p in _other_pairs(self._Vn, self.F, self.K, frames, seed=seed):

@@ -226,16 +226,17 @@ def _loop_area(uv: np.ndarray, loop: np.ndarray) -> float:
 
 
 def angle_sum_violations(
-    uv: np.ndarray, F: np.ndarray, n: int
+    uv: np.ndarray, F: np.ndarray, n: int, *, boundary: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Vertices where the uv map is not locally injective, from the uv angle sums around them.
 
     Returns (interior_bad, boundary_bad, B): an interior vertex whose angles do not sum to 2 pi
     (within `ANGLE_TOL`), a boundary vertex whose angles sum to more than 2 pi, and the boundary
-    edges ``B`` (of any number of charts: the faces ``F`` may hold several).
+    edges ``B`` (of any number of charts: the faces ``F`` may hold several; ``boundary`` when
+    the caller already has them).
     """
     angle_sum = np.bincount(F.ravel(), weights=corner_angles(uv, F).ravel(), minlength=n)
-    B = boundary_edges(F)
+    B = boundary_edges(F) if boundary is None else boundary
     on_boundary = np.zeros(n, dtype=bool)
     on_boundary[B.ravel()] = True
     used = np.bincount(F.ravel(), minlength=n) > 0
@@ -245,7 +246,12 @@ def angle_sum_violations(
 
 
 def chart_quality(
-    V: np.ndarray, F: np.ndarray, uv: np.ndarray, inv_frames: np.ndarray | None = None
+    V: np.ndarray,
+    F: np.ndarray,
+    uv: np.ndarray,
+    inv_frames: np.ndarray | None = None,
+    *,
+    boundary: tuple[np.ndarray, list[np.ndarray]] | None = None,
 ) -> ChartQuality:
     """Bijectivity checks and distortion of the chart map ``(V, F) -> uv``.
 
@@ -257,6 +263,9 @@ def chart_quality(
     uv : (n, 2) float ndarray
     inv_frames : (m, 2, 2) float ndarray, optional
         ``inverse_frames(triangle_frames(V, F))``, if already computed (see :func:`jacobians`).
+    boundary : (B, loops), optional
+        ``boundary_edges(F)`` and ``boundary_loops(F)``, if already computed (they depend on
+        ``F`` alone: a caller measuring several maps of one chart computes them once).
 
     Returns
     -------
@@ -269,11 +278,12 @@ def chart_quality(
 
     # Local injectivity from uv angle sums.
     n = len(V)
-    interior_bad, boundary_bad, B = angle_sum_violations(uv, F, n)
+    B, loops = (None, None) if boundary is None else boundary
+    interior_bad, boundary_bad, B = angle_sum_violations(uv, F, n, boundary=B)
     n_branch = int((interior_bad | boundary_bad).sum())
 
     n_cross = boundary_crossings(uv, B)
-    loops = boundary_loops(F, boundary=B)
+    loops = boundary_loops(F, boundary=B) if loops is None else loops
     areas = np.array([_loop_area(uv, loop) for loop in loops])
     if len(areas):
         outer = int(np.argmax(np.abs(areas)))

@@ -84,9 +84,24 @@ def _fill_into(P, B, eps, mask):  # pragma: no cover - compiled
     A texel touches the union when it touches a boundary edge, or else when its centre lies
     inside, where the winding number of the outline is positive. Edges are rasterized as
     degenerate triangles; winding numbers are summed along rows from the edges' crossings of
-    the texel-centre lines. The work is proportional to the outline plus the box, not to the
-    triangle count.
+    the texel-centre lines (`outline_winding`). The work is proportional to the outline plus
+    the box, not to the triangle count.
     """
+    rows, cols = mask.shape
+    diff = outline_winding(P, B, eps, mask)
+    for row in range(rows):
+        w = 0
+        for col in range(cols):
+            w += diff[row, col]
+            if w > 0:
+                mask[row, col] = True
+
+
+@njit(cache=True, nogil=True)
+def outline_winding(P, B, eps, mask):  # pragma: no cover - compiled
+    """The first half of `_fill_into`: OR the texels the outline's edges touch into mask and
+    return the row-wise winding increments, ``diff[row, col]``: a texel's centre is inside
+    where the running sum of its row up to and including `col` is positive."""
     rows, cols = mask.shape
     E = np.empty((B.shape[0], 3), dtype=np.int64)
     for e in range(B.shape[0]):
@@ -108,12 +123,7 @@ def _fill_into(P, B, eps, mask):  # pragma: no cover - compiled
             x = xa + t * (xb - xa)
             first = min(max(int(np.ceil(x - 0.5)), 0), cols)  # first centre right of x
             diff[row, first] += step
-    for row in range(rows):
-        w = 0
-        for col in range(cols):
-            w += diff[row, col]
-            if w > 0:
-                mask[row, col] = True
+    return diff
 
 
 def rasterize_triangles(P: np.ndarray, F: np.ndarray, shape: tuple[int, int], eps: float):

@@ -20,7 +20,8 @@ triangle positive at every step, so the map stays locally injective by construct
   ``x = (u, v)`` whose gradient is the symmetric Dirichlet energy's. The step is
   ``d = -H^-1 grad E / 2``: exactly SLIM's step when ``mu = 0``, and a descent direction
   preconditioned by SLIM's matrix otherwise (``H`` is positive definite once a vertex per chart
-  is pinned). One Cholesky factorization per iteration (:func:`segparam.linalg.spd_solver`);
+  is pinned). One numeric Cholesky factorization per iteration, the symbolic one kept while the
+  pattern stays (:class:`segparam.linalg.FixedPattern`);
 * flip-free line search (Smith & Schaefer 2015, "Bijective Parameterization with Free
   Boundaries", sec. 3.1): along ``d`` the signed area of each triangle is a quadratic in the
   step ``tau``; its smallest positive root bounds the step, and ``tau = min(1, 0.8 * root)``
@@ -39,7 +40,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .linalg import spd_solver
+from .linalg import FixedPattern
 from .mesh import face_areas
 from .quality import inverse_frames, jacobians, singular_values, triangle_frames
 
@@ -58,16 +59,23 @@ ANGLE_WEIGHT = 16.0
 #: On charts of fewer than ``SMALL_CHART_FACES`` faces the refined map is kept only if its L2
 #: stretch is at most ``MAX_STRETCH_INCREASE`` above the starting map's (checked by the caller,
 #: :mod:`segparam.parameterize`). Larger charts that the conformal term stretches past the
-#: stretch target are split (``[split] max_stretch``, from the same size up), which is what
-#: brings fsaverage5's angle within 0.02 of xatlas's; small ones are not split, and the 40-face
-#: hemispheres of small spheres would go from L2 1.026 to 1.051 (measured, bench_atlas).
+#: stretch target are split (``[split] max_stretch``, from the same size up). This was 64 faces,
+#: which exempted the 40-face hemispheres of small spheres and most pieces of the realistic 2k
+#: brain (L2 1.026 / angle 1.244 and 1.035 / 1.205 in bench_atlas); now that the split stage
+#: solves small pieces in batches they are refined and split like any chart (1.005 / 1.093 with
+#: 1,203 charts, 1.007 / 1.077 with 108; xatlas 1.005 / 1.077 with 1,794, 1.021 / 1.057 with
+#: 134). 8 is the default ``[split] min_faces``: at the defaults the guard no longer applies.
 MAX_STRETCH_INCREASE = 0.01
-SMALL_CHART_FACES = 64
+SMALL_CHART_FACES = 8
 
 #: Iterations stop for a chart once one lowers its energy's excess over the isometry's (4) by
 #: less than this fraction (measured: on a saddle, a brain parcel and a spherical cap the energy
-#: is within 1e-4 of its limit after 5-10 iterations, where this rule stops).
-SLIM_TOL = 1e-2
+#: is within 1e-4 of its limit after 5-10 iterations, where this rule stops). 1e-2 until the
+#: small charts were refined too: the realistic 2k brain's 108 charts (mostly under 64 faces)
+#: stopped early, at angle 1.0775 (xatlas + 0.02 = 1.0773); 5e-3 gives 1.0770, fsaverage5 and
+#: brain-20k move by <= 0.0003, no stage time measurably more (parameterize_charts, CPU, loaded
+#: machine); 1e-3 gives 1.0754 on the brain at +25% of its stage time.
+SLIM_TOL = 5e-3
 #: ... or once that excess is below this: every triangle within ~0.1% of an isometry (a
 #: developable chart; the excess is about ``8 eps^2`` for singular values ``1 +- eps``).
 SLIM_FLOOR = 1e-5
@@ -241,6 +249,8 @@ def slim_refine(
     first = np.full(n_charts, n)
     np.minimum.at(first, vc, np.arange(n))
     pin[first[first < n]] = True
+    stiffness = local * area[:, None, None]
+    system = None
     for _ in range(iterations):
         if not active.any():
             break
@@ -250,12 +260,11 @@ def slim_refine(
         g = _energy_gradients(J, angle_weight) * area[faces][:, None, None]
         grad = np.concatenate([_scatter_rows(D, faces, g[:, i, :]) for i in range(2)])
         move = active[vc] & ~pin
-        free = np.concatenate([move, move])
-        H = _proxy_matrix(F[faces], local[faces] * area[faces][:, None, None], W2, free)
+        if system is None or move.sum() < SYSTEM_REUSE * system.size:
+            system = _ProxySystem(F, faces, n, stiffness)
         # SLIM's proxy sum A ||W (J - R)||^2 has gradient 2 (H x - rhs) = grad E, so its
         # minimiser is x - H^-1 grad E / 2; pinned vertices stay
-        delta = np.zeros(2 * n)
-        delta[free] = -0.5 * spd_solver(H)(grad[free])
+        delta = -0.5 * system.solve(faces, W2, move, grad)
         d = np.stack([delta[:n], delta[n:]], axis=1)
         tau_max = _segment_min(fc[faces], _step_bound(uv, d, F[faces]), n_charts)
         tau = np.where(active, np.minimum(1.0, STEP_FRACTION * tau_max), 0.0)
@@ -293,34 +302,62 @@ def _slim_weights(J: np.ndarray) -> np.ndarray:
     return w2[:, None, None] * np.eye(2) + (w1 - w2)[:, None, None] * u[:, :, None] * u[:, None, :]
 
 
-def _proxy_matrix(
-    F: np.ndarray, stiffness: np.ndarray, W2: np.ndarray, free: np.ndarray
-) -> sp.csc_matrix:
+#: SLIM's system keeps its pattern (and symbolic factorization) while the charts still moving
+#: hold at least this fraction of its vertices; the others' rows are identity rows meanwhile.
+#: Below it the system is rebuilt over the moving charts only, so a long tail of iterations on
+#: a few charts does not refactorize the whole batch.
+SYSTEM_REUSE = 0.5
+
+
+class _ProxySystem:
     """Quadratic part ``H`` of SLIM's proxy ``sum_t A_t ||W_t (J_t - R_t)||_F^2`` over the stacked
-    ``x = (u, v)`` (the proxy is ``x^T H x - 2 rhs^T x + const``), rows and columns ``free`` only.
+    ``x = (u, v)`` of the vertices of some faces (the proxy is ``x^T H x - 2 rhs^T x + const``),
+    with a fixed pattern (:class:`segparam.linalg.FixedPattern`) across iterations.
 
     Column ``k`` of ``J_t`` is ``c_k = (g_k . u_t, g_k . v_t)`` (``g_k`` the triangle's gradient
     coefficients, ``u_t`` its corners' values) and the term is ``sum_k (c_k - R e_k)^T W^T W
     (c_k - R e_k)``: block ``(a, b)`` of ``H`` gathers ``A_t (W^T W)_ab sum_k g_k g_k^T``, the
-    triangle's ``stiffness`` (given times ``A_t``) scaled by one weight, assembled from COO
-    triplets.
+    triangle's stiffness (given times ``A_t``) scaled by one weight. A vertex that does not
+    move (pinned, or its chart has stopped) gets an identity row and column, so its step is 0.
     """
-    n = len(free) // 2
-    index = np.full(2 * n, -1)
-    index[free] = np.arange(int(free.sum()))
-    rows, cols, vals = [], [], []
-    for a in range(2):  # the four (u, v) blocks
-        for b in range(2):
-            r = index[np.broadcast_to((F + a * n)[:, :, None], stiffness.shape)]
-            c = index[np.broadcast_to((F + b * n)[:, None, :], stiffness.shape)]
-            keep = (r >= 0) & (c >= 0)
-            rows.append(r[keep])
-            cols.append(c[keep])
-            vals.append((W2[:, a, b][:, None, None] * stiffness)[keep])
-    k = int(free.sum())
-    return sp.csc_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(k, k)
-    )
+
+    def __init__(self, F: np.ndarray, faces: np.ndarray, n: int, stiffness: np.ndarray) -> None:
+        self.faces = faces
+        self.verts = np.unique(F[faces])
+        self.size = len(self.verts)
+        m = self.size
+        index = np.full(n, -1)
+        index[self.verts] = np.arange(m)
+        self._where = np.full(len(F), -1)
+        self._where[faces] = np.arange(len(faces))
+        # per face, entry (a, b, i, j): row index[F_i] + a m, column index[F_j] + b m
+        local = index[F[faces]]  # (k, 3)
+        a, b, i, j = (x.ravel() for x in np.indices((2, 2, 3, 3)))
+        rows = local[:, i] + a * m
+        cols = local[:, j] + b * m
+        lower = rows >= cols
+        self._entry = np.flatnonzero(lower)  # into the (k, 36) table, row-major
+        self._rows, self._cols = rows[lower], cols[lower]
+        diag = np.arange(2 * m)
+        self._pattern = FixedPattern(
+            np.concatenate([self._rows, diag]), np.concatenate([self._cols, diag]), 2 * m
+        )
+        self._stiffness = stiffness[faces][:, i, j]  # (k, 36), reordered like (a, b, i, j)
+        self._block = 2 * a + b
+        self._dofs = np.concatenate([self.verts, self.verts + n])
+
+    def solve(self, faces: np.ndarray, W2: np.ndarray, move: np.ndarray, rhs: np.ndarray):
+        """``H^-1 rhs`` over all ``2 n`` values (0 for the vertices that do not move), ``H`` at
+        the weights ``W2`` of ``faces`` (a subset of the system's faces)."""
+        weights = np.zeros((len(self.faces), 4))
+        weights[self._where[faces]] = W2.reshape(-1, 4)
+        values = (weights[:, self._block] * self._stiffness).ravel()[self._entry]
+        free = np.concatenate([move[self.verts], move[self.verts]])
+        values = values * (free[self._rows] & free[self._cols])
+        solve = self._pattern.solver(np.concatenate([values, (~free).astype(np.float64)]))
+        out = np.zeros(len(rhs))
+        out[self._dofs] = solve(np.where(free, rhs[self._dofs], 0.0))
+        return out
 
 
 def _scatter_rows(D: sp.csr_matrix, faces: np.ndarray, g: np.ndarray) -> np.ndarray:

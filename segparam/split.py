@@ -63,8 +63,8 @@ from .parameterize import (
     solve_charts,
 )
 from .quality import ChartQuality, chart_quality
-from .refine import ANGLE_WEIGHT, SMALL_CHART_FACES
-from .segment import divide, face_affinity
+from .refine import ANGLE_WEIGHT, SMALL_CHART_FACES, slim_refine
+from .segment import divide, divide_many, face_affinity
 
 log = logging.getLogger(__name__)
 
@@ -76,14 +76,15 @@ __all__ = ["Chart", "ChartSet", "SplitConfig", "parameterize_charts", "project_c
 #: 8 charts (L2 1.0083), fsaverage5's cortex goes 57 -> 68 charts (L2 1.0143 -> 1.0092), the
 #: icosphere 2 -> 4 (1.061 -> 1.006); 1.01 costs fsaverage5 106 charts and 2-4x the stage time.
 MAX_STRETCH = 1.02
-#: Charts with fewer faces are not split for stretch: they are the pieces of small curved parts
-#: (the 40-face halves of 80-face spheres), which a split flattens only a little, at a solver
-#: call per piece: on 300 such spheres the target took the stage from 1.5 to 60+ s. The
-#: refinement keeps their stretch instead (:data:`segparam.refine.SMALL_CHART_FACES`).
+#: Charts with fewer faces are not split for stretch below ``SMALL_CHART_MAX_STRETCH``: at the
+#: default ``min_faces`` (8) these are the pieces the split stage projects onto their plane (and
+#: refines, :func:`_refine_projections`). It was 64, which kept the 40-face halves of small
+#: spheres at L2 1.026 (angle 1.244): a split per piece cost a solver call each then (300 spheres:
+#: 1.5 -> 60+ s); the pieces are solved in batches now (:func:`_solve_in_rounds`).
 STRETCH_MIN_FACES = SMALL_CHART_FACES
 #: ... unless their stretch is past this ceiling: a small chart this stretched is a bad map, not
-#: a curved part that a split would flatten little (the realistic 2k-face brain kept a 58-face
-#: chart at L2 7.6, Linf 70 under the exemption; the small spheres' halves sit at 1.03-1.05).
+#: a piece that a split would flatten little (the realistic 20k-face brain had a 7-face piece
+#: whose projection was bijective at L2 3.6, Linf 12; the refinement overlapped it: it is split).
 SMALL_CHART_MAX_STRETCH = 1.25
 #: Smaller meshes are parameterized in this process: starting workers costs about a second.
 PARALLEL_MIN_FACES = 100_000
@@ -502,7 +503,7 @@ def _bulk_charts(
     nv = np.diff(sub.vptr)
     small = (nf < cfg.min_faces) | (nv < MIN_POINTS)
     # Planar: every face normal within PLANAR_TOL of the chart's first face's.
-    N = face_normals(V, F)[order]
+    N = face_normals(V, F[order])  # only the faces of these charts (rounds pass few)
     lab = np.repeat(np.arange(n_src), nf)
     dev = np.abs(N - N[bounds[:-1]][lab]).max(axis=1)  # the last chart has faces: in range
     planar = np.zeros(n_src, dtype=bool)
@@ -558,7 +559,13 @@ def _bulk_charts(
         Vp, Fp, vc = part(proj)
         uv, has_normal = _project_union(Vp, Fp, vc, len(proj))
         q = charts_quality(Vp, Fp, uv, vc, len(proj))
-        ok = has_normal & (q["bijective"] | (c_small[proj] & (nf[cand][proj] == 1)))
+        uv, q = _refine_projections(Vp, Fp, vc, uv, q, has_normal & c_small[proj], cfg)
+        single = c_small[proj] & (nf[cand][proj] == 1)  # a triangle: always kept
+        fits = q["bijective"] & (
+            ~c_small[proj]
+            | _within_targets(q["angle_distortion"], q["l2_stretch"], nf[cand][proj], cfg)
+        )
+        ok = has_normal & (fits | single)
         planar_ok[proj[ok & c_planar[proj]]] = True
         emit(proj, vc, uv, q, ok & c_small[proj], "projection")
         emit(proj, vc, uv, q, ok & c_planar[proj], "planar")
@@ -594,6 +601,34 @@ def _bulk_charts(
     return out
 
 
+def _refine_projections(
+    V: np.ndarray,
+    F: np.ndarray,
+    vert_chart: np.ndarray,
+    uv: np.ndarray,
+    q: dict[str, np.ndarray],
+    which: np.ndarray,
+    cfg: SplitConfig,
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """With ``refine="slim"``, the refinement (:func:`segparam.refine.slim_refine`) of the
+    bijective projections among the charts ``which`` of a disjoint union, kept where still
+    bijective: the projection of a small piece of a curved surface is a valid start, but its
+    stretch can be far from the least (a 4-face piece of the realistic 2k brain: L2 2.24)."""
+    go = which & q["bijective"] & (q["n_flipped"] == 0) & (q["n_degenerate"] == 0)
+    if cfg.refine != "slim" or not go.any():
+        return uv, q
+    n = len(go)
+    uv_s, moved = slim_refine(
+        V, F, uv, vert_chart=vert_chart, n_charts=n, charts=go, angle_weight=cfg.angle_weight
+    )
+    if not moved.any():
+        return uv, q
+    q_s = charts_quality(V, F, uv_s, vert_chart, n)
+    use = (moved > 0) & q_s["bijective"]
+    q = {k: np.where(use, q_s[k], q[k]) for k in q}
+    return np.where(use[vert_chart][:, None], uv_s, uv), q
+
+
 class _MeshAffinity:
     """The crease-aware face affinity (:func:`segment.face_affinity`) that splits failing charts.
 
@@ -606,11 +641,15 @@ class _MeshAffinity:
         self._V, self._F = V, F
         self._W: sp.csr_matrix | None = None
 
-    def restricted(self, faces: np.ndarray) -> sp.csr_matrix:
-        """The affinity among ``faces`` (mesh face indices), in their order."""
+    def mesh(self) -> sp.csr_matrix:
+        """The affinity of the whole mesh."""
         if self._W is None:
             self._W = face_affinity(self._V, self._F)
-        return self._W[faces][:, faces]
+        return self._W
+
+    def restricted(self, faces: np.ndarray) -> sp.csr_matrix:
+        """The affinity among ``faces`` (mesh face indices), in their order."""
+        return self.mesh()[faces][:, faces]
 
     def of_chart(self, faces: np.ndarray, *, now: bool) -> Callable[[], sp.csr_matrix]:
         """What :func:`_solve_source` calls for a chart's affinity when it must split the chart:
@@ -658,10 +697,10 @@ def _solve_in_rounds(
 
     Each round tries every piece left: the small ones (at most ``BATCH_MAX_VERTICES`` vertices)
     all at once through :func:`_bulk_charts`, the others one by one (:func:`_try_piece`); the
-    pieces that fail are bisected (:func:`segparam.segment.divide`) for the next round. The
-    pieces a split makes are mostly small, and one solver call each cost ~20 ms of set-up
-    (measured on the plate's hole walls and the cortex with a stretch target). A chart the bulk
-    pass already rejected (``bulk_rejected``) is bisected at once. Returns what
+    pieces that fail are bisected, all at once (:func:`segparam.segment.divide_many`), for the
+    next round. The pieces a split makes are mostly small, and one solver call each cost ~20 ms
+    of set-up (measured on the plate's hole walls and the cortex with a stretch target). A chart
+    the bulk pass already rejected (``bulk_rejected``) is bisected at once. Returns what
     :func:`_solve_source` returns, per chart: pieces in chart-local indices and units, sorted as
     its depth-first bisection would emit them.
     """
@@ -671,7 +710,6 @@ def _solve_in_rounds(
         pos[sources[src]] = np.arange(len(sources[src]))
     pieces: dict[int, list[tuple[tuple, Chart]]] = {src: [] for src in rest}
     first = dict.fromkeys(rest, False)
-    W: dict[int, sp.csr_matrix] = {}
     # (chart, faces in chart-local indices, depth, path of bisection choices, bulk tried it)
     pending = [(src, np.arange(len(sources[src])), 0, (), bool(bulk_rejected[src])) for src in rest]
     open_pieces = dict.fromkeys(rest, 1)
@@ -691,7 +729,7 @@ def _solve_in_rounds(
             got = _bulk_charts(V, F, sub_b, order, bounds, cfg, size, rejected)
             mapped = {batch[i]: got[i][0][0] for i in got}
         rejected_at = {batch[i] for i in np.flatnonzero(rejected)}
-        nxt = []
+        nxt, cut = [], []
         for k, (src, faces, depth, path, tried) in enumerate(pending):  # loop over pieces
             vertices, local_F = sub.of(src)
             status: dict = {}
@@ -712,14 +750,20 @@ def _solve_in_rounds(
             if chart is not None:
                 pieces[src].append((path, chart))
             else:
-                if src not in W:
-                    W[src] = affinity.of_chart(sources[src], now=False)()
-                parts = [p for p in divide(W[src], faces, seed=seed) if len(p)]
-                nxt.extend((src, p, depth + 1, (*path, i), False) for i, p in enumerate(parts))
-                open_pieces[src] += len(parts)
-            if open_pieces[src] == 0 and progress is not None:
-                done += 1
-                progress(done)
+                cut.append((src, faces, depth, path))
+        # The pieces that failed, all cut at once (in mesh face indices, back to chart-local).
+        groups = [sources[src][faces] for src, faces, _, _ in cut]
+        for (src, _, depth, path), parts in zip(
+            cut, divide_many(affinity.mesh(), groups, seed=seed) if cut else [], strict=True
+        ):  # loop over the pieces cut
+            parts = [pos[p] for p in parts if len(p)]
+            nxt.extend((src, p, depth + 1, (*path, i), False) for i, p in enumerate(parts))
+            open_pieces[src] += len(parts)
+        if progress is not None:
+            for src in dict.fromkeys(src for src, *_ in pending):  # charts of this round
+                if open_pieces[src] == 0:
+                    done += 1
+                    progress(done)
         pending = nxt
     return {src: ([c for _, c in sorted(pieces[src], key=lambda t: t[0])], first[src])
             for src in rest}  # fmt: skip
@@ -814,7 +858,15 @@ def _try_piece(
         return None
     uv = project_chart(Vl, local_F)
     quality = chart_quality(Vl, local_F, uv)
-    if quality.bijective or len(faces) == 1:
+    if quality.bijective and len(faces) > 1 and cfg.refine == "slim":
+        uv_s, moved = slim_refine(Vl, local_F, uv, angle_weight=cfg.angle_weight)
+        q_s = chart_quality(Vl, local_F, uv_s) if moved[0] else None
+        if q_s is not None and q_s.bijective:
+            uv, quality = uv_s, q_s
+    if len(faces) == 1 or (
+        quality.bijective
+        and bool(_within_targets(quality.angle_distortion, quality.l2_stretch, len(faces), cfg))
+    ):
         return Chart(faces, vertices, local_F, uv, quality, src, depth, "projection")
     return None
 

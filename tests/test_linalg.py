@@ -63,6 +63,25 @@ def test_spd_solver_falls_back_on_an_indefinite_matrix():
     np.testing.assert_allclose(A @ x, b, atol=1e-12)
 
 
+def test_fixed_pattern_refactorizes_new_values(K):
+    """One pattern, two sets of values (repeated entries summed): each factorization solves its
+    own matrix, the symbolic step of the first reused by the second; an indefinite set falls
+    back to a fresh LU and still solves."""
+    n = K.shape[0]
+    lower = sp.tril(K).tocoo()
+    rows = np.concatenate([lower.row, np.arange(n)])  # the diagonal twice: summed
+    cols = np.concatenate([lower.col, np.arange(n)])
+    pattern = linalg.FixedPattern(rows, cols, n)
+    b = np.random.default_rng(2).standard_normal(n)
+    shift = 1e-3 * abs(K).sum(axis=0).max()
+    for scale, extra in ((1.0, shift), (3.0, 10 * shift), (1.0, -1e3 * shift)):
+        values = np.concatenate([scale * lower.data, np.full(n, extra)])
+        A = scale * K + extra * sp.identity(n)
+        x = pattern.solver(values)(b)
+        np.testing.assert_allclose(A @ x, b, atol=1e-8 * np.abs(b).max() * abs(A).max())
+    assert pattern._symbolic is not None
+
+
 @pytest.mark.parametrize("with_guess", [False, True])
 def test_sparse_paths_match_the_dense_solve(K, path, with_guess):
     n = K.shape[0]

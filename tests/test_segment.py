@@ -335,3 +335,49 @@ def test_rounding_keeps_segmentations_valid():
     assert_valid(F, seg)  # connected disks
     assert seg.n_charts == base.n_charts
     assert _cut_edges(F, seg.labels) < _cut_edges(F, base.labels)  # measured: 299 vs 315
+
+
+def test_divide_many_cuts_as_divide_does():
+    """The batched cut gives :func:`divide`'s pieces, in its order, for connected and
+    disconnected sets, small and large, next to each other in the mesh."""
+    from segparam.linalg import DENSE_LIMIT
+    from segparam.segment import divide, divide_many, face_affinity
+
+    m = trimesh.creation.icosphere(3)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    W = face_affinity(V, F)
+    z = V[F].mean(axis=1)[:, 2]
+    x = V[F].mean(axis=1)[:, 0]
+    groups = [
+        np.flatnonzero(z > 0.6),  # a cap
+        np.flatnonzero((z <= 0.6) & (z > -0.2) & (x > 0)),  # a band piece next to it
+        np.flatnonzero((z < -0.9) | ((z <= -0.2) & (z > -0.3) & (x > 0))),  # in several pieces
+        np.flatnonzero((z < -0.3) & (z > -0.9) & (x > 0))[:2],  # two faces
+        np.flatnonzero((z <= 0.6) & (z > -0.9) & (x <= 0)),  # over DENSE_LIMIT: one by one
+    ]
+    assert len(np.unique(np.concatenate(groups))) == sum(map(len, groups))  # disjoint
+    assert len(groups[4]) > DENSE_LIMIT
+    many = divide_many(W, groups, seed=0)
+    for g, parts in zip(groups, many, strict=True):
+        one = divide(W, g, seed=0)
+        assert len(parts) == len(one)
+        assert all(np.array_equal(a, b) for a, b in zip(parts, one, strict=True))
+
+
+def test_a_planar_region_is_one_chart_and_a_two_chart_open_region_is_tried_whole():
+    """The plate's top and bottom (planar, with holes) are one chart each whatever their share
+    of the curvature count; an open region whose share is two charts is left whole for the split
+    stage (a gently curved open patch whose curvature asks for two)."""
+    from segparam.mesh import face_normals
+
+    V, F = plate_with_holes()
+    seg = segment(V, F)
+    N = face_normals(V, F)
+    for side in (1.0, -1.0):  # top and bottom
+        faces = np.flatnonzero(np.abs(N[:, 2] - side) < 1e-9)
+        assert len(np.unique(seg.labels[faces])) == 1
+    V, F = tri_grid(24, 24)
+    V = np.c_[V[:, :2], 0.3 * np.sin(3 * V[:, 0]) * np.cos(3 * V[:, 1])]
+    two = segment(V, F, config=SegmentConfig(n_charts=2))
+    assert two.target_charts == 2 and two.n_charts == 1
+    assert segment(V, F, config=SegmentConfig(n_charts=3)).n_charts == 3
