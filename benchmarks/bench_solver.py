@@ -64,6 +64,7 @@ VARIANTS = (
     ("classic-hlle", "pca", "none"),
     ("hessian", "normals", "arap"),
     ("classic-hlle", "pca", "arap"),
+    ("hessian", "normals", "slim"),  # the pipeline's default ([split] refine)
 )
 
 # ---------------------------------------------------------------------------------------------

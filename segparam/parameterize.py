@@ -3,9 +3,10 @@
 This module follows the paper ("Hessian Eigenfunctions for Triangular Mesh Parameterization"),
 a variant of Hessian LLE (Donoho & Grimes 2003), section by section:
 
-* 3.1 tangent plane at every vertex from the average of its adjacent triangle normals, and local
-  coordinates ``(u, v)`` of its neighbourhood ``N_i`` in that plane (:func:`neighbourhoods`,
-  :func:`tangent_frames`);
+* 3.1 tangent plane at every vertex from the average of its adjacent triangle normals (averaged
+  again over a few rings, ``NORMAL_SMOOTHING``: not in the paper, measured on cortical parcels),
+  and local coordinates ``(u, v)`` of its neighbourhood ``N_i`` in that plane
+  (:func:`neighbourhoods`, :func:`tangent_frames`);
 * 3.2 quadratic least-squares interpolation on ``N_i``; its quadratic coefficients ``alpha, beta,
   gamma`` give the tangent Hessian (eq. 5) and ``C_i = 4 a a^T + 2 b b^T + 4 g g^T`` (eq. 6)
   (:func:`local_hessians`);
@@ -19,7 +20,9 @@ the chart closest to isometric, and :func:`orient` keeps the input winding (no m
 Then (not in the paper, on by default, ``refine="none"`` turns it off) :func:`arap_refine` runs a
 few as-rigid-as-possible iterations from that map and keeps them only if they do not make the map
 worse: measured on folded cortex-like parcels, it turns most of the eigenmap's few boundary flips
-into bijective maps and brings the median angle distortion close to 1 (see BENCHMARKS.md).
+into bijective maps and brings the median angle distortion close to 1 (see BENCHMARKS.md). A
+refined map that is still not bijective is refined again from the next pairs of eigenvectors
+(``FALLBACK_PAIRS``).
 ``refine="slim"`` (the pipeline's default, ``[split] refine``) then runs the flip-free
 distortion refinement of :mod:`segparam.refine` on a map with no flipped triangle.
 
@@ -101,6 +104,12 @@ MIN_POINTS = 6
 MIN_RCOND = 0.03
 #: Most points added to one neighbourhood for conditioning.
 MAX_EXTEND = 6
+#: Rounds of neighbour averaging of the vertex normals behind the tangent planes (issue 16; see
+#: :func:`tangent_frames`). Raw map (``refine="none"``) on the 89 parcels of
+#: ``bench_solver.py --part quality``, rounds 0 / 1 / 2 / 3 / 4 / 5 / 6 / 10: fsaverage5 (real)
+#: 72 / 79 / 78 / 83 / 81 / 81 / 81 / 76, cortex 53 / 71 / 80 / 80 / 82 / 80 / 75 / 64,
+#: cortex-ico 55 / 67 / 76 / 77 / 80 / 79 / 78 / 65 bijective: 4 has the best total.
+NORMAL_SMOOTHING = 4
 #: Extend only boundary neighbourhoods (issue 16). On folded cortex, a 1-ring squeezed by a fold
 #: projects to a nearly degenerate design on the normals plane; extending it adds points on one
 #: side of the fold and its Hessian flips triangles nearby, while the truncated pseudo-inverse of
@@ -391,11 +400,25 @@ def tangent_frames(
     idx: np.ndarray,
     *,
     tangent: str = "normals",
+    smoothing: int = NORMAL_SMOOTHING,
+    adjacency: sp.csr_matrix | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """An orthonormal basis ``[b1, b2]`` of the tangent plane ``T_x M`` at every vertex (sec. 3.1).
 
     ``tangent="normals"`` (the paper): the plane normal to the average of the adjacent triangle
-    normals. ``tangent="pca"`` (classic HLLE): the least-squares plane of ``N_i``.
+    normals ``n_bar_i``, then averaged `smoothing` times with the neighbours' (``n_i <- n_i +
+    sum_{j ~ i} n_j``, normalized), so the plane follows the surface over a few rings rather than
+    the adjacent triangles alone. On folded cortex the adjacent triangles of a vertex in a sulcal
+    fold or on a chart's boundary give a plane tilted against its neighbours', and the
+    projections ``O_i`` of neighbouring vertices then disagree; the averaged planes raised the
+    raw map from 72 to 81 of 89 bijective on real fsaverage5 parcels and from 53-55 to 80-82 on
+    the synthetic cortex sets (``NORMAL_SMOOTHING``). ``smoothing=0`` is the paper's plane.
+    ``tangent="pca"`` (classic HLLE): the least-squares plane of ``N_i``.
+
+    Parameters
+    ----------
+    adjacency : (n, n) scipy.sparse.csr_matrix, optional
+        ``vertex_adjacency(F, n)``, when the caller already has it.
 
     Returns
     -------
@@ -407,6 +430,12 @@ def tangent_frames(
         flat = np.linalg.norm(normal, axis=1) < 0.5  # adjacent normals cancel: fall back to PCA
         if flat.any():
             normal[flat] = _pca_normals(V, ptr, idx)[flat]
+        if smoothing:
+            A = vertex_adjacency(F, len(V)) if adjacency is None else adjacency
+            for _ in range(smoothing):  # rounds over all vertices at once
+                total = normal + A @ normal
+                norm = np.linalg.norm(total, axis=1, keepdims=True)
+                normal = np.divide(total, norm, out=normal, where=norm > 1e-12)
     else:  # "pca"
         normal = _pca_normals(V, ptr, idx)
     return plane_basis(normal)
@@ -553,7 +582,7 @@ def hessian_matrix(
     ptr, idx = neighbourhoods(V, F, min_points=min_points, extra=extra, adjacency=A)
     # Averaged-normal frames do not depend on N_i (only their rare flat-vertex fallback uses the
     # first N_i): they are computed once. PCA frames follow every extension.
-    b1, b2 = tangent_frames(V, F, ptr, idx, tangent=tangent)
+    b1, b2 = tangent_frames(V, F, ptr, idx, tangent=tangent, adjacency=A)
     for _ in range(MAX_EXTEND):
         bad = ill_conditioned(V, ptr, idx, b1, b2, min_rcond, check)
         if EXTEND_BOUNDARY_ONLY:
@@ -776,6 +805,79 @@ def _arap(
     raise AssertionError("unreachable")  # pragma: no cover
 
 
+#: Eigenvector pairs tried, in this order, when the refined map of the paper's pair (the two
+#: smallest non-constant eigenvectors, 0 and 1 here) is not bijective (issue 16), among the four
+#: smallest. On the 89-parcel sets of ``bench_solver.py --part quality`` the default's failures
+#: were global folds of the eigenmap (one coordinate nearly a function of the other, a thin
+#: curved band); the refinement cannot undo them, and started from the pair (0, 2) it ended
+#: bijective on both charts the default failed (fsaverage5 and cortex-ico). With all five pairs
+#: of the four smallest, ``build_atlas`` on the 2k / 20k realistic brains (``bench_atlas.py``'s
+#: brain-2k, ``data/brain.obj``) tried 6 / 3 charts and rescued one each, from (0, 2) / (1, 3);
+#: no other pair rescued a chart, and every pair tried costs a refinement (brain-2k's
+#: parameterize stage 0.30 -> 0.55 s with five pairs): so these two.
+FALLBACK_PAIRS = ((0, 2), (1, 3))
+
+
+def _other_pairs(V: np.ndarray, F: np.ndarray, K, frames: np.ndarray, *, seed: int = 0):
+    """Yield the start maps of ``FALLBACK_PAIRS`` (isometric fit, oriented) for one chart.
+
+    The four smallest non-constant eigenvectors of ``K`` (eq. 3 with two more functions): the
+    five smallest eigenvectors with the constant projected out, rotated by a Rayleigh-Ritz step
+    so that they come in the order of their Hessian energy.
+    """
+    n = len(V)
+    if n < 6:
+        return
+    _, vectors = smallest_eigenpairs(K, 5, seed=seed)
+    X = vectors - vectors.mean(axis=0)
+    U = np.linalg.svd(X, full_matrices=False)[0][:, :4]
+    U = U @ np.linalg.eigh(U.T @ (K @ U))[1]
+    for i, j in FALLBACK_PAIRS:
+        yield orient(isometric_fit(V, F, U[:, [i, j]], frames), F)
+
+
+def _refine_map(
+    V, F, uv, frames, refine, refine_iterations, angle_weight, boundary=None, slim_below=None
+):
+    """The refinement of :meth:`HessianSolver.solve` from the start map ``uv`` of one chart (in
+    units of its typical edge): returns (uv, quality, refined). ``boundary``: the chart's
+    boundary edges and loops, when the caller has them (see :func:`chart_quality`);
+    ``slim_below``: no ``"slim"`` step for a map stretching more than this (L2)."""
+    refined = False
+    quality = None
+    steps = 0
+    if refine in ("arap", "slim"):
+        uv_r, steps = _arap(V, F, uv, iterations=refine_iterations, inv_frames=frames)
+    if steps:
+        q_r = chart_quality(V, F, uv_r, frames, boundary=boundary)
+        if q_r.bijective:
+            uv, quality, refined = uv_r, q_r, True
+        else:
+            quality = chart_quality(V, F, uv, frames, boundary=boundary)
+            if not quality.bijective and q_r.n_flipped < quality.n_flipped:
+                uv, quality, refined = uv_r, q_r, True
+    if quality is None:
+        quality = chart_quality(V, F, uv, frames, boundary=boundary)
+    if (
+        refine == "slim"
+        and quality.n_flipped == 0
+        and quality.n_degenerate == 0
+        and (slim_below is None or quality.l2_stretch <= slim_below)
+    ):
+        uv_s, moved = slim_refine(V, F, uv, inv_frames=frames, angle_weight=angle_weight)
+        q_s = chart_quality(V, F, uv_s, frames, boundary=boundary) if moved[0] else None
+        if (
+            q_s is not None
+            and q_s.bijective
+            and (
+                len(F) >= SMALL_CHART_FACES
+                or q_s.l2_stretch <= quality.l2_stretch + MAX_STRETCH_INCREASE
+            )
+        ):
+            uv, quality, refined = uv_s, q_s, True
+    return uv, quality, refined
+
+
 class HessianSolver:
     """Keeps a chart's Hessian matrix ``K`` so it can be inspected or solved again.
 
@@ -832,7 +934,10 @@ class HessianSolver:
         for angle distortion), kept when bijective (and, on charts of fewer than
         ``SMALL_CHART_FACES`` faces, when its L2 stretch is at most ``MAX_STRETCH_INCREASE``
         above the map's before).
-        ``refine="none"`` returns the paper's map as it is.
+        ``refine="none"`` returns the paper's map as it is. With a refinement, a map that still
+        is not bijective is refined again from the next pairs of eigenvectors of ``K``
+        (``FALLBACK_PAIRS``, first bijective kept): the paper's pair can fold a chart over
+        globally, which the refinement cannot undo.
 
         ``slim_below``: a map that stretches more than this (L2) before ``"slim"`` is returned
         unrefined. The split stage passes its stretch target: the conformal term trades stretch
@@ -850,48 +955,16 @@ class HessianSolver:
         frames = inverse_frames(triangle_frames(self._Vn, self.F))  # shared by every measure
         B = boundary_edges(self.F)
         boundary = (B, boundary_loops(self.F, boundary=B))  # F's alone: once for every measure
-
-        def measure(x: np.ndarray) -> ChartQuality:
-            return chart_quality(self._Vn, self.F, x, frames, boundary=boundary)
-
         uv = orient(isometric_fit(self._Vn, self.F, Y, frames), self.F)
         t2 = time.perf_counter()
-        refined = False
-        quality = None
-        steps = 0
-        if refine in ("arap", "slim"):
-            uv_r, steps = _arap(
-                self._Vn, self.F, uv, iterations=refine_iterations, inv_frames=frames
-            )
-        if steps:
-            q_r = measure(uv_r)
-            if q_r.bijective:
-                uv, quality, refined = uv_r, q_r, True
-            else:
-                quality = measure(uv)
-                if not quality.bijective and q_r.n_flipped < quality.n_flipped:
-                    uv, quality, refined = uv_r, q_r, True
-        if quality is None:
-            quality = measure(uv)
-        if (
-            refine == "slim"
-            and quality.n_flipped == 0
-            and quality.n_degenerate == 0
-            and (slim_below is None or quality.l2_stretch <= slim_below)
-        ):
-            uv_s, moved = slim_refine(
-                self._Vn, self.F, uv, inv_frames=frames, angle_weight=angle_weight
-            )
-            q_s = measure(uv_s) if moved[0] else None
-            if (
-                q_s is not None
-                and q_s.bijective
-                and (
-                    len(self.F) >= SMALL_CHART_FACES
-                    or q_s.l2_stretch <= quality.l2_stretch + MAX_STRETCH_INCREASE
-                )
-            ):
-                uv, quality, refined = uv_s, q_s, True
+        args = (frames, refine, refine_iterations, angle_weight, boundary, slim_below)
+        uv, quality, refined = _refine_map(self._Vn, self.F, uv, *args)
+        if not quality.bijective and refine != "none":
+            for uv_p in _other_pairs(self._Vn, self.F, self.K, frames, seed=seed):
+                uv_p, q_p, _ = _refine_map(self._Vn, self.F, uv_p, *args)
+                if q_p.bijective:
+                    uv, quality, refined = uv_p, q_p, True
+                    break
         t3 = time.perf_counter()
         return ChartMap(
             uv=(uv - uv.min(axis=0)) * self.scale,
@@ -944,7 +1017,8 @@ def parameterize_chart(
         ``"arap"`` (default): as-rigid-as-possible iterations from the eigenmap, kept only when
         they do not make the map worse (:meth:`HessianSolver.solve`); ``"slim"``: the same, then
         the flip-free symmetric Dirichlet refinement (:mod:`segparam.refine`), kept when
-        bijective; ``"none"``: the paper's map.
+        bijective; ``"none"``: the paper's map. With ``"arap"`` or ``"slim"`` a map that is not
+        bijective is refined again from the next eigenvector pairs (``FALLBACK_PAIRS``).
     angle_weight : float
         ``refine="slim"`` only: weight (>= 0) of the conformal term added to the symmetric
         Dirichlet energy (:func:`segparam.refine.slim_refine`); higher trades L2 stretch for
@@ -1454,6 +1528,23 @@ def solve_charts(
             q = {k: np.where(use_s, q_s[k], q[k]) for k in q}
             uv = np.where(use_s[vert_chart][:, None], uv_s, uv)
             use_r |= use_s
+    if refine != "none":
+        # FALLBACK_PAIRS, as HessianSolver.solve; a loop over the few charts still not bijective
+        args = (refine, refine_iterations, angle_weight)
+        limits = None if slim_below is None else np.broadcast_to(slim_below, (n_charts,))
+        for c in np.flatnonzero(~q["bijective"]):
+            vs, fs = vstart[c], fstart[c]
+            v_c, f_c = slice(vs, vs + size[c]), slice(fs, fs + n_faces[c])
+            V_c, F_c, frames_c = Vn[v_c], F[f_c] - vs, frames[f_c]
+            limit = None if limits is None else float(limits[c])
+            for uv_p in _other_pairs(V_c, F_c, K[v_c, v_c], frames_c):
+                uv_p, q_p, _ = _refine_map(V_c, F_c, uv_p, frames_c, *args, slim_below=limit)
+                if q_p.bijective:
+                    uv[v_c] = uv_p
+                    for name, value in q_p.as_dict().items():
+                        q[name][c] = value
+                    use_r[c] = True
+                    break
     low = np.minimum.reduceat(uv, vstart, axis=0)
     uv = (uv - low[vert_chart]) * scale[vert_chart][:, None]
     return ChartMaps(uv=uv, quality=q, refined=use_r, eigenvalues=values)

@@ -121,6 +121,28 @@ def test_pca_tangent_option_runs_and_is_recorded():
     assert chart.tangent == "pca" and chart.bijective
 
 
+def test_tangent_planes_average_the_normals_over_rings():
+    # smoothing=0 is the paper's plane (sec. 3.1): normal to the average of the adjacent
+    # triangle normals; averaged again over rings, the planes of a flat chart are still its plane,
+    # and those of a cylinder stay within 10 degrees of the radial normal.
+    from segparam.mesh import vertex_normals
+
+    V, F = cylinder_patch()
+    ptr, idx = neighbourhoods(V, F)
+    b1, b2 = tangent_frames(V, F, ptr, idx, smoothing=0)
+    assert np.allclose(np.cross(b1, b2), vertex_normals(V, F))
+    radial = V * [1, 1, 0] / np.linalg.norm(V[:, :2], axis=1, keepdims=True)
+    for smoothing in (1, 4):
+        b1, b2 = tangent_frames(V, F, ptr, idx, smoothing=smoothing)
+        cos = np.abs((np.cross(b1, b2) * radial).sum(axis=1))
+        assert cos.min() > np.cos(np.radians(10))  # 3.1 deg unsmoothed, 7.4 after 4 rounds
+    V, F = tri_grid(8, 8)
+    ptr, idx = neighbourhoods(V, F)
+    b1, b2 = tangent_frames(rigid(V, seed=1), F, ptr, idx)
+    n = np.cross(b1, b2)
+    assert np.allclose(n, n[0]) and np.allclose(np.linalg.norm(n, axis=1), 1)
+
+
 def test_eq6_local_hessian_on_exact_quadratics():
     # Seven points in the plane; quadratics are fitted exactly, so f^T C f = ||Hess f||_F^2.
     th = np.linspace(0, 2 * np.pi, 7)[:-1]
@@ -386,3 +408,25 @@ def test_classic_hlle_matrix_of_six_points_is_the_projector_off_affine_functions
     K = classic_hlle_matrix(V, n_neighbors=12).toarray()
     np.testing.assert_allclose(K, 6 * (np.eye(6) - P), atol=1e-10)
     np.testing.assert_allclose(K @ A, 0, atol=1e-10)  # constants and coordinates: no Hessian
+
+
+def test_a_folded_eigenmap_is_refined_from_the_next_eigenvector_pair(monkeypatch):
+    # A parcel of the realistic icosahedral cortex whose paper's pair folds over globally (a
+    # thin curved band): ARAP cannot undo it; refined from the pair (0, 2) it is bijective
+    # (FALLBACK_PAIRS), in the chart-by-chart solver and in the batched one alike.
+    import segparam.parameterize as parameterize
+    from segparam.parameterize import solve_charts
+    from segparam.synthetic import brain_like_parcels
+
+    V, F = brain_like_parcels(
+        12, mean_faces=460, min_faces=380, max_faces=560, connectivity="icosahedral", seed=0
+    )[2]
+    solver = HessianSolver(V, F)
+    assert not solver.solve(refine="none").bijective
+    chart = solver.solve()
+    assert chart.bijective and chart.refined
+    maps = solve_charts(V, F, np.zeros(len(V), dtype=np.int64))
+    assert maps.quality["bijective"][0] and maps.refined[0]
+    assert procrustes_residual(maps.uv, chart.uv) < 1e-6 * np.ptp(chart.uv)
+    monkeypatch.setattr(parameterize, "FALLBACK_PAIRS", ())
+    assert not solver.solve().bijective
