@@ -90,7 +90,9 @@ def pipeline_rows(sizes: list[int], seed: int) -> list[dict]:
             report = atlas.report()["atlas"]
             row = {"faces": len(F), "tool": f"segparam ({name})", "seconds": seconds}
             row.update(
-                measures(atlas.V[atlas.uv_vertex], atlas.uv, atlas.uv_F, atlas.chart_of_face)
+                measures(
+                    atlas.V, atlas.F, atlas.uv, atlas.uv_F, atlas.uv_vertex, atlas.chart_of_face
+                )
             )
             row["bijective_charts"] = int(report["bijective_charts"])
             row["faces_out"] = int(len(atlas.uv_F))
