@@ -337,7 +337,7 @@ def edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     half_to_edge : (3 m,) int64 ndarray
         Edge index of half-edge ``3 f + k`` (from ``F[f, k]`` to ``F[f, (k + 1) % 3]``).
     """
-    H = np.sort(_half_edges(F), axis=1)
+    H = np.sort(_half_edges(F), axis=1).astype(np.int64, copy=False)  # keys overflow int32
     n = int(H.max(initial=0)) + 1
     keys, inverse = np.unique(H[:, 0] * n + H[:, 1], return_inverse=True)
     E = np.stack([keys // n, keys % n], axis=1)

@@ -233,3 +233,15 @@ def test_group_by_label_lists_each_label_in_index_order():
     order, bounds = mesh.group_by_label(labels, 5)
     groups = [order[bounds[k] : bounds[k + 1]].tolist() for k in range(5)]
     assert groups == [[1, 4], [], [0, 2, 3], [5], []]
+
+
+def test_edges_of_int32_faces_past_46341_vertices():
+    # the edge keys lo * n + hi overflow 32 bits from n = 46,341: they are built in int64
+    n = 50_000
+    F = np.array([[0, n - 1, n - 2], [1, n - 1, n - 2]], dtype=np.int32)
+    E, h2e = mesh.edges(F)
+    assert E.dtype == np.int64
+    np.testing.assert_array_equal(
+        E, [[0, n - 2], [0, n - 1], [1, n - 2], [1, n - 1], [n - 2, n - 1]]
+    )
+    np.testing.assert_array_equal(E[h2e], np.sort(mesh._half_edges(F), axis=1))
