@@ -282,6 +282,18 @@ def _write_material(stage: Path, mtl_name: str, checker_name: str) -> bytes:
     return checker
 
 
+def _write_mesh(
+    stage: Path, atlas, obj_name: str, glb_name: str | None, mtl_name: str, checker: bytes
+) -> None:
+    """One atlas's mesh files: the OBJ with its uvs (material ``mtl_name``) and, when named,
+    the GLB with the ``checker`` texture."""
+    write_obj(stage / obj_name, atlas.V, atlas.F, uv=atlas.uv, uv_faces=atlas.uv_F, mtl=mtl_name)
+    if glb_name is not None:
+        (stage / glb_name).write_bytes(
+            _glb_bytes(atlas.V[atlas.uv_vertex], atlas.uv_F, atlas.uv, checker)
+        )
+
+
 def _write_tail(stage: Path, uv_name: str, uv_png: bytes, extra: dict, report_name: str, report):
     """The files every atlas folder ends with: the uv picture, the pictures, ``report.json``."""
     import json
@@ -343,17 +355,7 @@ def save_atlas(
         report["pictures"] = pictures_info
         with staged_outputs(outdir) as stage:
             checker = _write_material(stage, names["mtl"], names["checker"])
-            write_obj(
-                stage / names["obj"],
-                atlas.V,
-                atlas.F,
-                uv=atlas.uv,
-                uv_faces=atlas.uv_F,
-                mtl=names["mtl"],
-            )
-            (stage / names["glb"]).write_bytes(
-                _glb_bytes(atlas.V[atlas.uv_vertex], atlas.uv_F, atlas.uv, checker)
-            )
+            _write_mesh(stage, atlas, names["obj"], names["glb"], names["mtl"], checker)
             _write_tail(stage, names["uv"], uv_png, extra, names["report"], report)
     except MeshFileError:
         raise
@@ -428,18 +430,8 @@ def save_atlases(
         with staged_outputs(outdir) as stage:
             checker = _write_material(stage, names["mtl"], names["checker"])
             for atlas, files_of in zip(atlases, names["meshes"], strict=True):  # per mesh
-                write_obj(
-                    stage / files_of["obj"],
-                    atlas.V,
-                    atlas.F,
-                    uv=atlas.uv,
-                    uv_faces=atlas.uv_F,
-                    mtl=names["mtl"],
-                )
-                if "glb" in files_of:
-                    (stage / files_of["glb"]).write_bytes(
-                        _glb_bytes(atlas.V[atlas.uv_vertex], atlas.uv_F, atlas.uv, checker)
-                    )
+                glb = files_of.get("glb")
+                _write_mesh(stage, atlas, files_of["obj"], glb, names["mtl"], checker)
             for scene in names["scenes"]:  # one GLB per scene, a node per mesh
                 parts = [
                     (
