@@ -248,18 +248,6 @@ def _pool_rows(
 
 
 @njit(cache=True, nogil=True)
-def fits(forbid, height, width, mask, rows, cols, row, col):  # pragma: no cover - compiled
-    """Whether the footprint ``mask[:rows, :cols]`` fits with its corner at (row, col)."""
-    if row < 0 or col < 0 or row + rows > height or col + cols > width:
-        return False
-    for i in range(rows):
-        for j in range(cols):
-            if mask[i, j] and forbid[row + i, col + j]:
-                return False
-    return True
-
-
-@njit(cache=True, nogil=True)
 def _leading_edges(mask, rows, cols):  # pragma: no cover - compiled
     """The footprint's lower and left edges: its cells (i, j) whose neighbour below (i - 1, j),
     respectively to the left (i, j - 1), is not in it, i.e. the texels that a one-texel move

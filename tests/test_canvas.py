@@ -38,8 +38,11 @@ def _canvas_with_blobs(width: int, height: int, pad: int, seed: int, rule: str):
 
 
 def _fits(forbid, mask, row, col) -> bool:
+    """Brute force: the footprint lies inside the canvas and meets no forbidden texel."""
     r, c = mask.shape
-    return bool(canvas.fits(forbid, forbid.shape[0], forbid.shape[1], mask, r, c, row, col))
+    if row < 0 or col < 0 or row + r > forbid.shape[0] or col + c > forbid.shape[1]:
+        return False
+    return not (mask & forbid[row : row + r, col : col + c]).any()
 
 
 def test_candidates_are_the_lowest_fitting_positions_per_column() -> None:
