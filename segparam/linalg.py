@@ -107,8 +107,8 @@ class FixedPattern:
     only, and the values are summed into the pattern's slots without sorting.
 
     For iterations that solve one system per step (:func:`segparam.refine.slim_refine`): on a
-    40k-row chart system the symbolic step cost as much as the numeric one, and building a
-    scipy matrix and its lower triangle as much again.
+    40k-row chart system the symbolic step cost 0.019 s against the numeric one's 0.035-0.053 s,
+    and building the scipy matrix and its lower triangle for cvxopt 0.019 s more.
 
     Parameters
     ----------
