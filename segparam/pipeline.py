@@ -23,7 +23,7 @@ import numpy as np
 from . import __version__
 from .clean import CleanResult, clean
 from .errors import ConfigError, InvalidMeshError
-from .mesh import boundary_edges, connected_components, face_areas, mesh_arrays, unit_frame
+from .mesh import boundary_edges, face_areas, mesh_arrays, unit_frame
 from .pack import MAX_RESOLUTION, PackConfig, PackResult, pack_charts
 from .quality import distortion, signed_areas
 from .remesh import RemeshConfig, RemeshResult, remesh
@@ -614,8 +614,8 @@ def _chart_mesh(
         cleaned = clean(V, F)
     report("clean", 1, 1)
     if len(cleaned.F) > chart_room(cfg.pack.resolution or MAX_RESOLUTION, cfg.pack.padding):
-        # Charts are connected: at least one per connected piece (counted only when it can matter).
-        pieces = connected_components(cleaned.F)[0]
+        # Charts are connected: at least one per connected piece (clean counted them).
+        pieces = cleaned.components
         _check_room(pieces, cfg.pack, f"the mesh has {pieces} connected pieces, so at least")
     _check_density(float(face_areas(cleaned.V, cleaned.F).sum()), cfg.pack)
 
@@ -637,7 +637,9 @@ def _chart_mesh(
             config=cfg.split,
             seed=seed,
             progress=lambda done: report("parameterize", done, seg.n_charts),
+            affinity=seg.affinity,
         )
+    seg = dataclasses.replace(seg, affinity=None)  # an (m, m) matrix the atlas need not keep
     return _Charted(Vm, Fm, chart_set, timings, seg, cleaned, remeshed)
 
 

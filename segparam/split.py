@@ -275,6 +275,7 @@ def parameterize_charts(
     config: SplitConfig | None = None,
     seed: int = 0,
     progress: Callable[[int], None] | None = None,
+    affinity: sp.csr_matrix | None = None,
 ) -> ChartSet:
     """Map every chart of a segmentation bijectively, splitting the ones that fail.
 
@@ -291,6 +292,10 @@ def parameterize_charts(
     seed : int
     progress : callable, optional
         Called with the number of segmentation charts finished so far.
+    affinity : (m, m) scipy.sparse.csr_matrix, optional
+        The face affinity that failing charts are split on: the segmentation's
+        (``Segmentation.affinity``), or by default :func:`segparam.segment.face_affinity` with
+        its default weights, built on the first split.
 
     Returns
     -------
@@ -305,6 +310,10 @@ def parameterize_charts(
             f"got shape {labels.shape} and dtype {labels.dtype}"
         )
     labels = labels.astype(np.int64)
+    if affinity is not None and affinity.shape != (len(F), len(F)):
+        raise InvalidMeshError(
+            f"affinity must be {len(F)} x {len(F)} (one row per face), got {affinity.shape}"
+        )
     center, size = unit_frame(V)
     V = (V - center) / size  # scale-free; chart uvs are scaled back below
     n_src = int(labels.max()) + 1
@@ -321,7 +330,7 @@ def parameterize_charts(
     rest = np.flatnonzero(~in_bulk).tolist()  # the charts that need the solver alone
     jobs = cfg.n_jobs or os.cpu_count() or 1
     parallel = jobs > 1 and len(rest) > 1 and len(F) >= PARALLEL_MIN_FACES
-    affinity = _MeshAffinity(V, F)
+    affinity = _MeshAffinity(V, F, affinity)
 
     def task(src: int) -> tuple:
         """The arguments of :func:`_solve_source` for chart ``src`` (before ``cfg, seed``).
@@ -638,9 +647,9 @@ class _MeshAffinity:
     ``n_jobs``.
     """
 
-    def __init__(self, V: np.ndarray, F: np.ndarray) -> None:
+    def __init__(self, V: np.ndarray, F: np.ndarray, W: sp.csr_matrix | None = None) -> None:
         self._V, self._F = V, F
-        self._W: sp.csr_matrix | None = None
+        self._W = W
 
     def mesh(self) -> sp.csr_matrix:
         """The affinity of the whole mesh."""

@@ -138,6 +138,30 @@ def test_chart_affinity_is_the_mesh_wide_one_restricted_and_built_on_first_use(m
     assert (now() != expected).nnz == 0 and built == [1]  # built once for the mesh
 
 
+def test_the_segmentations_affinity_is_split_on_and_not_built_again(monkeypatch):
+    import segparam.split as split
+    from segparam.errors import InvalidMeshError
+    from segparam.mesh import unit_frame
+    from segparam.segment import face_affinity
+
+    m = trimesh.creation.torus(2.0, 0.7, major_sections=32, minor_sections=16)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    seg = segment(V, F)
+    center, size = unit_frame(V)
+    # The segmentation's affinity is the one the split stage would build (both scale-free).
+    assert (seg.affinity != face_affinity((V - center) / size, F)).nnz == 0
+    tight = SplitConfig(max_stretch=1.0001)  # forces splits, so the affinity is needed
+    own = parameterize_charts(V, F, seg.labels, config=tight)
+    assert own.splits.sum() > 0
+    monkeypatch.setattr(split, "face_affinity", lambda V, F: pytest.fail("built again"))
+    given = parameterize_charts(V, F, seg.labels, config=tight, affinity=seg.affinity)
+    assert np.array_equal(own.splits, given.splits)
+    for a, b in zip(own.charts, given.charts, strict=True):
+        assert np.array_equal(a.faces, b.faces) and np.array_equal(a.uv, b.uv)
+    with pytest.raises(InvalidMeshError, match="affinity must be"):
+        parameterize_charts(V, F, seg.labels, affinity=seg.affinity[:-1])
+
+
 def test_small_charts_are_exempt_from_the_stretch_target_only_below_a_ceiling():
     from segparam.split import (
         SMALL_CHART_MAX_STRETCH,
