@@ -202,11 +202,6 @@ class RemeshResult:
 # ---------------------------------------------------------------------------------------------
 
 
-def _edge_lengths(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    E, _ = edges(F)
-    return E, np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
-
-
 def mesh_quality(V, F) -> MeshQuality:
     """Measure the shape of a mesh's triangles and the regularity of its connectivity.
 
@@ -230,10 +225,12 @@ def mesh_quality(V, F) -> MeshQuality:
 
 def _quality(V: np.ndarray, F: np.ndarray) -> MeshQuality:
     min_angles = np.degrees(corner_angles(V, F).min(axis=1))
-    E, length = _edge_lengths(V, F)
+    edge_index = edges(F)  # once, for the lengths and the boundary
+    E = edge_index[0]
+    length = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
     valence = np.bincount(E.ravel(), minlength=len(V))
     interior = valence > 0
-    interior[boundary_edges(F).ravel()] = False
+    interior[boundary_edges(F, edge_index=edge_index).ravel()] = False
     val = valence[interior]
     mean = float(length.mean())
     return MeshQuality(

@@ -679,10 +679,16 @@ def _round_charts(
             t_next = -2.0 * (A @ t_cur + a_cur * c) - t_prev
             t_prev, t_cur, a_prev, a_cur = t_cur, t_next, a_cur, -2.0 * a_cur - a_prev
             value += ck * t_cur
-        # Vote: the largest value per face; ties keep the current chart.
+        # Vote: the largest value per face; ties keep the current chart, then the lowest chart.
+        # The keys are sorted by face, so a face's pairs are one run: its winner is the run's
+        # first pair at the run's largest value (a sort of all pairs took 18 of the 84 ms here
+        # on the sample brain).
         value += 1e-6 * (labels[f] == k)
-        order = np.lexsort((-value, f))
-        win = order[np.r_[True, f[order][1:] != f[order][:-1]]]
+        new_face = np.r_[True, f[1:] != f[:-1]]
+        run = np.cumsum(new_face) - 1
+        best = np.maximum.reduceat(value, np.flatnonzero(new_face))
+        cand = np.flatnonzero(value == best[run])
+        win = cand[np.r_[True, run[cand][1:] != run[cand][:-1]]]
         new = labels.copy()
         new[f[win]] = k[win]
         old_size = np.bincount(labels, minlength=n_labels)
