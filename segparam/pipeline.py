@@ -28,7 +28,14 @@ from .pack import MAX_RESOLUTION, PackConfig, PackResult, pack_charts
 from .quality import distortion, signed_areas
 from .remesh import RemeshConfig, RemeshResult, remesh
 from .segment import Segmentation, SegmentConfig, segment
-from .split import ChartSet, SplitConfig, parameterize_charts
+from .split import (
+    PARALLEL_MIN_FACES,
+    ChartSet,
+    SplitConfig,
+    parameterize_charts,
+    start_workers,
+    stop_workers,
+)
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -609,6 +616,27 @@ def _chart_mesh(
         raise InvalidMeshError(
             f"mesh has {n_faces} faces; the limit is {MAX_FACES} (about 3 KB of memory per face)"
         )
+    # The split stage's worker processes start now: their start-up (2 s of CPU each) overlaps
+    # with cleaning and segmenting, which run on one core.
+    workers = start_workers(cfg.split) if n_faces >= PARALLEL_MIN_FACES else None
+    try:
+        charted = _chart_stages(V, F, cfg, seed, report, workers)
+    except BaseException:
+        stop_workers(workers, now=True)
+        raise
+    stop_workers(workers)
+    return charted
+
+
+def _chart_stages(
+    V: np.ndarray,
+    F: np.ndarray,
+    cfg: PipelineConfig,
+    seed: int,
+    report: Callable[[str, int, int], None],
+    workers,
+) -> _Charted:
+    """:func:`_chart_mesh`'s stages, with the split stage's ``workers`` (or None)."""
     timings: dict[str, float] = {}
     with _timed(timings, "clean"):
         cleaned = clean(V, F)
@@ -638,6 +666,7 @@ def _chart_mesh(
             seed=seed,
             progress=lambda done: report("parameterize", done, seg.n_charts),
             affinity=seg.affinity,
+            workers=workers,
         )
     seg = dataclasses.replace(seg, affinity=None)  # an (m, m) matrix the atlas need not keep
     return _Charted(Vm, Fm, chart_set, timings, seg, cleaned, remeshed)

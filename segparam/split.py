@@ -88,6 +88,9 @@ STRETCH_MIN_FACES = SMALL_CHART_FACES
 SMALL_CHART_MAX_STRETCH = 1.25
 #: Smaller meshes are parameterized in this process: starting workers costs about a second.
 PARALLEL_MIN_FACES = 100_000
+#: How long stopping the workers waits for the pool's manager thread to end (it takes
+#: milliseconds once the workers are terminated; the bound only keeps a stuck one from hanging).
+STOP_JOIN_SECONDS = 10.0
 #: A chart is planar when no unit face normal differs from the first by more than this.
 PLANAR_TOL = 1e-9
 #: Charts of at most this many vertices that need the solver are solved together, as one
@@ -262,9 +265,70 @@ def _stop(pool) -> None:
     """Cancel what has not started and end the workers now (they ignore Ctrl-C)."""
     # taken before shutdown, which forgets them
     processes = list((getattr(pool, "_processes", None) or {}).values())
+    manager = getattr(pool, "_executor_manager_thread", None)
     pool.shutdown(wait=False, cancel_futures=True)
     for process in processes:
         process.terminate()
+    # The pool's manager thread closes its wake-up pipe as it ends; Python 3.11's exit hook
+    # writes to that pipe unlocked, and printed a traceback (EBADF) when the two raced: a
+    # Ctrl-C while the workers were still starting. Let it end first.
+    if manager is not None:
+        manager.join(timeout=STOP_JOIN_SECONDS)
+
+
+def _warm_worker() -> None:
+    """A worker's start: import the solver and load its compiled kernel on a small bent grid,
+    before the first chart arrives (about 1 s of imports and 0.3-0.9 s of kernel loading)."""
+    u, v = np.meshgrid(np.linspace(0.0, 1.0, 5), np.linspace(0.0, 1.0, 5))
+    V = np.stack([u.ravel(), v.ravel(), 0.3 * (u * v).ravel()], axis=1)
+    q = (np.arange(4)[:, None] * 5 + np.arange(4)[None, :]).ravel()  # lower-left corners
+    F = np.concatenate([np.stack([q, q + 1, q + 6], 1), np.stack([q, q + 6, q + 5], 1)])
+    parameterize_chart(V, F, refine="slim")
+
+
+def start_workers(config: SplitConfig | None = None):
+    """Start the worker processes of :func:`parameterize_charts` ahead of it.
+
+    Each worker's start-up (imports and the solver's compiled kernel, about 2 s of CPU) then
+    overlaps with what the caller does meanwhile: :func:`segparam.pipeline.build_atlas` starts
+    them before it cleans and segments a mesh of ``PARALLEL_MIN_FACES`` faces or more, on one
+    core, and hands them over with ``parameterize_charts(..., workers=pool)``.
+
+    Returns
+    -------
+    concurrent.futures.ProcessPoolExecutor or None
+        None where the config asks for one job (or the machine has one CPU). The caller shuts
+        it down (:func:`stop_workers`).
+    """
+    cfg = config or SplitConfig()
+    jobs = cfg.n_jobs or os.cpu_count() or 1
+    if jobs <= 1:
+        return None
+    pool = _new_pool(jobs)
+    with _sigint_blocked():
+        for _ in range(jobs):  # a submit starts a worker while none is idle
+            pool.submit(int)
+    return pool
+
+
+def stop_workers(pool, *, now: bool = False) -> None:
+    """Shut down the workers of :func:`start_workers` (None: nothing to do): after their tasks,
+    or ``now``, cancelling what has not started (on an error or Ctrl-C)."""
+    if pool is None:
+        return
+    if now:
+        _stop(pool)
+    else:
+        pool.shutdown()
+
+
+def _new_pool(jobs: int):
+    """A pool of ``jobs`` spawned workers, each warmed up as it starts (:func:`_warm_worker`)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    ctx = multiprocessing.get_context("spawn")  # no fork after BLAS threads have started
+    return ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_warm_worker)
 
 
 def parameterize_charts(
@@ -276,6 +340,7 @@ def parameterize_charts(
     seed: int = 0,
     progress: Callable[[int], None] | None = None,
     affinity: sp.csr_matrix | None = None,
+    workers=None,
 ) -> ChartSet:
     """Map every chart of a segmentation bijectively, splitting the ones that fail.
 
@@ -296,6 +361,10 @@ def parameterize_charts(
         The face affinity that failing charts are split on: the segmentation's
         (``Segmentation.affinity``), or by default :func:`segparam.segment.face_affinity` with
         its default weights, built on the first split.
+    workers : concurrent.futures.ProcessPoolExecutor, optional
+        Workers already started (:func:`start_workers`), used instead of starting new ones when
+        the charts go to worker processes (``n_jobs``, ``PARALLEL_MIN_FACES``); the caller
+        shuts them down.
 
     Returns
     -------
@@ -343,12 +412,10 @@ def parameterize_charts(
 
     results: dict[int, tuple[list[Chart], bool]] = {}
     if parallel:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor, as_completed
+        from concurrent.futures import as_completed
 
-        ctx = multiprocessing.get_context("spawn")  # no fork after BLAS threads have started
         by_size = sorted(rest, key=lambda s: -len(sources[s]))  # big ones first
-        pool = ProcessPoolExecutor(max_workers=min(jobs, len(rest)), mp_context=ctx)
+        pool = workers if workers is not None else _new_pool(min(jobs, len(rest)))
         try:
             # Ctrl-C goes to the whole process group. The workers start (and live) with SIGINT
             # blocked, a mask they inherit, so only this process sees it and stops them: no
@@ -362,7 +429,8 @@ def parameterize_charts(
         except BaseException:
             _stop(pool)
             raise
-        pool.shutdown()
+        if workers is None:
+            pool.shutdown()
     else:
         results = _solve_in_rounds(
             V, F, rest, sources, sub, affinity, cfg, seed, size, bulk_rejected, bulk_bijective,

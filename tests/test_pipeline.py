@@ -113,6 +113,29 @@ def test_nothing_lost_accounting():
     assert json.dumps(summary)  # JSON-ready, names the removed faces
 
 
+@pytest.mark.slow
+def test_split_workers_start_before_cleaning_and_are_the_ones_used(monkeypatch):
+    import segparam.pipeline as pipeline
+    import segparam.split as split
+
+    monkeypatch.setattr(pipeline, "PARALLEL_MIN_FACES", 0)  # a small mesh takes the big path
+    monkeypatch.setattr(split, "PARALLEL_MIN_FACES", 0)
+    events, pools = [], []
+    real_start, real_clean, real_new = split.start_workers, pipeline.clean, split._new_pool
+    monkeypatch.setattr(
+        pipeline, "start_workers", lambda c: events.append("start") or real_start(c)
+    )
+    monkeypatch.setattr(pipeline, "clean", lambda V, F: events.append("clean") or real_clean(V, F))
+    monkeypatch.setattr(split, "_new_pool", lambda jobs: pools.append(jobs) or real_new(jobs))
+    V, F = plate_with_holes()
+    cfg = FAST.replace(remesh={"mode": "off"})
+    parallel = build_atlas(V, F, cfg.replace(split={"n_jobs": 2}))
+    assert events == ["start", "clean"] and pools == [2]  # one pool, started first
+    serial = build_atlas(V, F, cfg.replace(split={"n_jobs": 1}))
+    assert pools == [2]  # one job: no worker
+    assert np.array_equal(parallel.uv, serial.uv) and np.array_equal(parallel.uv_F, serial.uv_F)
+
+
 def test_too_large_mesh_is_refused_before_work(monkeypatch):
     import segparam.pipeline as pipeline
 
