@@ -534,12 +534,21 @@ def _outlines(G: np.ndarray, fchart: np.ndarray, voff: np.ndarray, ok: np.ndarra
     n = len(voff)
     E = np.concatenate([G[:, [0, 1]], G[:, [1, 2]], G[:, [2, 0]]])  # per chart: 01, 12, 20
     echart = np.tile(fchart, 3)
-    directed = E[:, 0] * n_points + E[:, 1]
-    _, inv_d, count_d = np.unique(directed, return_inverse=True, return_counts=True)
+    # One sort by undirected edge (two np.unique calls took 0.75 s at 1M faces, this 0.46 s):
+    # a run of one is a boundary edge; an edge of 3+ faces, or of two that run it the same way
+    # (adjacent in the run, same first vertex), is not a valid outline.
     undirected = np.minimum(E[:, 0], E[:, 1]) * n_points + np.maximum(E[:, 0], E[:, 1])
-    _, inv_u, count_u = np.unique(undirected, return_inverse=True, return_counts=True)
-    count_u = count_u[inv_u.ravel()]
-    bad_edge = (count_d[inv_d.ravel()] > 1) | (count_u > 2)
+    order = np.argsort(undirected, kind="stable")
+    u = undirected[order]
+    start = np.r_[True, u[1:] != u[:-1]]
+    run = np.cumsum(start) - 1
+    count_u = np.empty(len(E), dtype=np.int64)
+    count_u[order] = np.bincount(run)[run]
+    tail = E[order, 0]
+    twice = ~start[1:] & (tail[1:] == tail[:-1])
+    bad_edge = count_u > 2
+    bad_edge[order[1:][twice]] = True
+    bad_edge[order[:-1][twice]] = True
     ok = ok & (np.bincount(echart, bad_edge, minlength=n) == 0)
     keep = (count_u == 1) & ok[echart]
     order = np.argsort(echart[keep], kind="stable")

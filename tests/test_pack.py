@@ -549,3 +549,30 @@ def test_random_charts_never_overlap(charts, padding, method) -> None:
     assert_valid_layout(res, faces)
     ratio = [area_uv(u, F) / a for u, F, a in zip(res.uvs, faces, areas, strict=True)]
     np.testing.assert_allclose(ratio, res.scale**2, rtol=1e-9)
+
+
+def test_outlines_are_the_boundary_edges_and_refuse_bad_edges() -> None:
+    # pack._outlines against a plain count of each chart's edges: a boundary edge has one face;
+    # an edge of three faces, or of two faces running it the same way, gives no outline
+    from collections import Counter
+
+    from segparam.pack import _outlines
+
+    uv, F = grid(3, 3)  # a valid disk
+    n = len(uv)
+    wrong_way = np.array([[0, 1, 4], [0, 1, 5]])  # both run 0 -> 1
+    three = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])  # edge 0-1 has three faces
+    charts = [F, wrong_way, three, F[:5]]
+    G = np.concatenate([c + i * n for i, c in enumerate(charts)])
+    fchart = np.repeat(np.arange(len(charts)), [len(c) for c in charts])
+    voff = np.arange(len(charts)) * n
+    got = _outlines(G, fchart, voff, np.ones(len(charts), dtype=bool), len(charts) * n)
+    for c, out in zip(charts, got, strict=True):
+        directed = Counter(map(tuple, np.concatenate([c[:, [0, 1]], c[:, [1, 2]], c[:, [2, 0]]])))
+        undirected = Counter(tuple(sorted(e)) for e in directed.elements())
+        if max(directed.values()) > 1 or max(undirected.values()) > 2:
+            assert out is None
+            continue
+        want = sorted(e for e in directed if undirected[tuple(sorted(e))] == 1)
+        assert sorted(map(tuple, out.tolist())) == want
+    assert got[0] is not None and got[1] is None and got[2] is None and got[3] is not None
