@@ -209,7 +209,7 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
 
     # 1. merge vertices
     rep = _merge_vertices(V, merge_tolerance * diag)
-    merged = n - len(np.unique(rep))
+    merged = n - int(np.count_nonzero(np.bincount(rep, minlength=n)))
     Fm = rep[F]
 
     # 2. degenerate faces; 3. duplicate faces
@@ -231,10 +231,10 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
     # 4. + 5. split, orient, cut non-orientable components
     fidx = alive
     Fm = Fm[alive]
-    glue, split_edges = _glue_pairs(Fm)
+    glue, split_edges, glue_edges = _glue_pairs(Fm)
     cut = 0
     while True:
-        Fs, vsrc, glue, h2e = _split(Fm, glue)
+        Fs, vsrc, glue, h2e = _split(Fm, glue, glue_edges)
         parity, comp, ncomp, conflicts = _parity(Fs, h2e)
         if len(conflicts) == 0:
             break
@@ -259,6 +259,7 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
         glue = glue[keep[gf].all(axis=1)]
         glue = newpos[glue // 3] * 3 + glue % 3
         Fm, fidx = Fm[keep], fidx[keep]
+        glue_edges = None  # the edges of the faces before this drop
         logger.debug("clean: removed %d faces that keep a surface non-orientable", len(drop))
 
     Vout = V[vsrc]
@@ -385,7 +386,7 @@ def _pair_keys(pairs: np.ndarray, m: int) -> np.ndarray:
     return P[:, 0] * (3 * m) + P[:, 1]
 
 
-def _glue_pairs(F: np.ndarray) -> tuple[np.ndarray, int]:
+def _glue_pairs(F: np.ndarray) -> tuple[np.ndarray, int, tuple]:
     """Half-edge pairs to glue: along every edge its faces, ordered, are paired (0,1), (2,3)...
 
     On an edge with more than two faces, faces whose other two edges are ordinary interior
@@ -399,6 +400,8 @@ def _glue_pairs(F: np.ndarray) -> tuple[np.ndarray, int]:
         Half-edge indices ``3 f + k``.
     nonmanifold : int
         Number of edges with more than two faces.
+    edge_index : tuple
+        ``edges(F)``.
     """
     E, h2e = edges(F)
     count = np.bincount(h2e, minlength=len(E))
@@ -409,7 +412,8 @@ def _glue_pairs(F: np.ndarray) -> tuple[np.ndarray, int]:
     start = np.cumsum(count) - count
     pos = h - start[hs]
     i = np.flatnonzero((pos % 2 == 0) & (pos + 1 < count[hs]))
-    return np.stack([order[i], order[i + 1]], axis=1), int(np.count_nonzero(count > 2))
+    glue = np.stack([order[i], order[i + 1]], axis=1)
+    return glue, int(np.count_nonzero(count > 2)), (E, h2e)
 
 
 def _split_corners(F: np.ndarray, glue: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -445,7 +449,7 @@ def _split_corners(F: np.ndarray, glue: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 
 def _split(
-    F: np.ndarray, glue: np.ndarray
+    F: np.ndarray, glue: np.ndarray, edge_index: tuple | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Split into fans; where an edge still has more than two faces, cut its extra faces free.
 
@@ -453,6 +457,9 @@ def _split(
     as the glued pair when its fans reach the pair's fans around both endpoints. Ungluing the
     extra faces' other edge at the edge's first endpoint separates them there. One pass suffices
     in theory; the loop is a guard.
+
+    ``edge_index`` is ``edges(F)``, if known: it serves ``Fs`` as well when nothing was split
+    (``Fs`` is then ``F``: 0.46 of 0.89 s at 1M faces went to computing it again).
 
     Returns
     -------
@@ -465,7 +472,8 @@ def _split(
     """
     while True:
         Fs, src = _split_corners(F, glue)
-        E, h2e = edges(Fs)
+        same = edge_index is not None and np.array_equal(Fs, F)
+        E, h2e = edge_index if same else edges(Fs)
         count = np.bincount(h2e, minlength=len(E))
         hbad = np.flatnonzero(count[h2e] > 2)
         if len(hbad) == 0:
