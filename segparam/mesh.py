@@ -659,19 +659,101 @@ def label_topology(F: np.ndarray, labels: np.ndarray, n_labels: int | None = Non
 
 
 def disk_labels(
-    F: np.ndarray, labels: np.ndarray, n_labels: int | None = None, *, holes: bool = True
+    F: np.ndarray,
+    labels: np.ndarray,
+    n_labels: int | None = None,
+    *,
+    holes: bool = True,
+    manifold_edges: tuple | None = None,
 ) -> np.ndarray:
     """:func:`is_disk` of every face set ``F[labels == k]``, all at once (see
     :func:`label_topology`).
+
+    ``manifold_edges`` is ``edges(F)`` of a mesh that is edge- and vertex-manifold and
+    consistently oriented, as :func:`segparam.clean.clean` leaves it: the labels are then tested
+    on their boundary half-edges (:func:`_manifold_disk_labels`), not as meshes of their own, with
+    the same answer (checked on 12,286 labels of segmentations, perturbed ones, merged charts and
+    whole closed parts) in a fifth of the time (1.57 -> 0.31 s of CPU at 1M faces).
 
     Returns
     -------
     (n_labels,) bool ndarray
         False for labels without faces.
     """
+    if manifold_edges is not None:
+        n = int(labels.max()) + 1 if n_labels is None else int(n_labels)
+        return _manifold_disk_labels(F, np.asarray(labels, np.int64), n, manifold_edges, holes)
     t = label_topology(F, labels, n_labels)
     loops = t["loops"]
     ok = t["edge_manifold"] & t["vertex_manifold"] & (t["components"] == 1) & (loops >= 1)
     if not holes:
         ok &= loops == 1
     return ok & (t["euler"] == 2 - loops) & (t["faces"] > 0)
+
+
+def _manifold_disk_labels(
+    F: np.ndarray, labels: np.ndarray, n: int, edge_index: tuple, holes: bool
+) -> np.ndarray:
+    """:func:`disk_labels` on a manifold, oriented mesh, from each label's boundary half-edges.
+
+    A half-edge is on its label's boundary unless its edge has two faces of that label. On such
+    a mesh a label is vertex-manifold iff no vertex starts two of its boundary half-edges (a
+    vertex where a label's faces form two fans starts one per fan); its vertices are then its
+    boundary half-edges' starts plus the vertices with no boundary half-edge at all (their whole
+    closed fan is in one label), its edges ``B + (3 F - B) / 2`` for ``B`` boundary half-edges,
+    its boundary loops the cycles of "the boundary half-edge leaving this one's end", and its
+    pieces the components of the face graph through its inner edges.
+    """
+    E, h2e = edge_index
+    m = len(F)
+    nv = int(F.max()) + 1
+    flat = F.ravel()
+    hl = np.repeat(labels, 3)  # label of every half-edge
+    count = np.bincount(h2e, minlength=len(E))
+    # two faces of one label: the labels' sum and sum of squares give (l1 - l2)^2 = 0 exactly
+    lf = hl.astype(np.float64)
+    total = np.bincount(h2e, weights=lf, minlength=len(E))
+    squares = np.bincount(h2e, weights=lf * lf, minlength=len(E))
+    inner = (count == 2) & (2 * squares == total * total)
+    hb = np.flatnonzero(~inner[h2e])
+    bl = hl[hb]
+    start, end = flat[hb], flat[hb - hb % 3 + (hb % 3 + 1) % 3]
+    key = bl * nv + start
+    order = np.argsort(key, kind="stable")
+    sk = key[order]
+    twice = np.zeros(n, dtype=bool)
+    twice[bl[order[np.flatnonzero(sk[1:] == sk[:-1])]]] = True
+    n_faces = np.bincount(labels, minlength=n)
+    n_b = np.bincount(bl, minlength=n)
+    n_edges = n_b + (3 * n_faces - n_b) // 2
+    on_boundary = np.zeros(nv, dtype=bool)
+    on_boundary[start] = True
+    used = np.zeros(nv, dtype=bool)
+    used[flat] = True
+    vlabel = np.zeros(nv, dtype=np.int64)
+    vlabel[flat] = hl  # any incident face's label: one label where it is read
+    n_vertices = n_b + np.bincount(vlabel[used & ~on_boundary], minlength=n)
+    nb = len(hb)
+    loops = np.zeros(n, dtype=np.int64)
+    if nb:
+        nxt = order[np.minimum(np.searchsorted(sk, bl * nv + end), nb - 1)]
+        G = sp.coo_matrix((np.ones(nb), (np.arange(nb), nxt)), shape=(nb, nb))
+        n_loops, loop = _cc(G, directed=False)
+        loop_label = np.zeros(n_loops, dtype=np.int64)
+        loop_label[loop] = bl  # a loop's half-edges share its label
+        loops = np.bincount(loop_label, minlength=n)
+    hi = np.flatnonzero(inner[h2e])
+    a = np.full(len(E), 3 * m, dtype=np.int64)
+    b = np.full(len(E), -1, dtype=np.int64)
+    np.minimum.at(a, h2e[hi], hi)
+    np.maximum.at(b, h2e[hi], hi)
+    e_in = np.flatnonzero(inner)
+    G = sp.coo_matrix((np.ones(len(e_in)), (a[e_in] // 3, b[e_in] // 3)), shape=(m, m))
+    n_pieces, piece = _cc(G, directed=False)
+    piece_label = np.zeros(n_pieces, dtype=np.int64)
+    piece_label[piece] = labels  # a piece's faces share its label
+    pieces = np.bincount(piece_label, minlength=n)
+    ok = ~twice & (pieces == 1) & (loops >= 1) & (n_faces > 0)
+    if not holes:
+        ok &= loops == 1
+    return ok & (n_vertices - n_edges + n_faces == 2 - loops)

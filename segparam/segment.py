@@ -59,6 +59,7 @@ from .mesh import (
     face_areas,
     face_normals,
     is_disk,
+    is_edge_manifold,
     mesh_arrays,
     unit_frame,
     vertex_adjacency,
@@ -848,7 +849,12 @@ def _halve_tiny(
 
 
 def _make_disks(
-    V: np.ndarray, F: np.ndarray, labels: np.ndarray, W: sp.csr_matrix, seed: int
+    V: np.ndarray,
+    F: np.ndarray,
+    labels: np.ndarray,
+    W: sp.csr_matrix,
+    seed: int,
+    edge_index: tuple | None = None,
 ) -> np.ndarray:
     """Cut every chart that is not a disk until all are.
 
@@ -856,10 +862,12 @@ def _make_disks(
     ``TINY_PART_FACES`` faces are cut in bulk (:func:`_halve_tiny`), round after round, every
     round testing only the charts it cut; larger ones are bisected along their Fiedler vector
     (:func:`divide`), one at a time (a loop over the few charts that are not disks).
+    ``edge_index`` is ``edges(F)`` of a manifold, oriented ``F`` (as clean leaves a mesh), for
+    the fast test of all charts (``disk_labels(..., manifold_edges=)``), or None.
     """
     labels = labels.copy()
     n = int(labels.max()) + 1
-    ok = disk_labels(F, labels, n)
+    ok = disk_labels(F, labels, n, manifold_edges=edge_index)
     size = np.bincount(labels, minlength=n)
     tiny = np.flatnonzero(~ok & (size <= TINY_PART_FACES))
     queue = np.flatnonzero(~ok & (size > TINY_PART_FACES)).tolist()
@@ -946,7 +954,8 @@ def segment(
     ----------
     V : (n, 3) float ndarray
     F : (m, 3) int ndarray
-        Edge-manifold, consistently oriented (see :mod:`segparam.clean`).
+        Edge- and vertex-manifold, consistently oriented: as :func:`segparam.clean.clean` leaves
+        a mesh.
     config : SegmentConfig, optional
     seed : int
         Seeds the proxy cells and the clustering.
@@ -960,7 +969,10 @@ def segment(
     center, size = unit_frame(V)
     V = (V - center) / size  # scale-free from here on
     m = len(F)
-    edge_index = edges(F)  # shared by the curvature and the affinity
+    edge_index = edges(F)  # shared by the curvature, the affinity and the disk test
+    # The input is vertex-manifold (clean's output); the disk test's fast path also needs every
+    # edge on at most two faces, traversed oppositely, which is cheap to check.
+    manifold = is_edge_manifold(F, edge_index=edge_index)
     curvature = integrated_curvature(V, F, edge_index=edge_index)
     if cfg.n_charts is not None:
         target = cfg.n_charts
@@ -1026,7 +1038,7 @@ def segment(
     labels = _relabel_components(labels, W)
     # Small charts join a neighbour inside their own feature region, never across its outline.
     labels = _merge_small(labels, W_in, min_faces)
-    labels = _make_disks(V, F, labels, W, seed)
+    labels = _make_disks(V, F, labels, W, seed, edge_index if manifold else None)
     n = int(labels.max()) + 1
     log.info("segment: %d faces -> %d charts (target %d)", m, n, target)
     return Segmentation(

@@ -245,3 +245,54 @@ def test_edges_of_int32_faces_past_46341_vertices():
         E, [[0, n - 2], [0, n - 1], [1, n - 2], [1, n - 1], [n - 2, n - 1]]
     )
     np.testing.assert_array_equal(E[h2e], np.sort(mesh._half_edges(F), axis=1))
+
+
+@pytest.mark.parametrize("holes", [True, False])
+def test_disk_labels_fast_path_on_manifold_meshes_agrees_with_the_general_test(holes):
+    # disk_labels(manifold_edges=...) reads each label's boundary half-edges; the general test
+    # builds every label's own mesh. Label fields with disks, annuli (holes), bowtie vertices,
+    # two-piece labels, a whole closed surface and a torus's bands.
+    import trimesh
+
+    from segparam.clean import clean
+
+    rng = np.random.default_rng(0)
+    surfaces = [tri_grid(12, 12), spherical_cap()]
+    for m in (trimesh.creation.torus(2.0, 0.7, major_sections=24, minor_sections=12),
+              trimesh.creation.icosphere(2)):  # fmt: skip
+        surfaces.append((np.asarray(m.vertices), np.asarray(m.faces)))
+    tested = disks = 0
+    for V, F in surfaces:
+        c = clean(V, F)
+        F = c.F
+        C = c.V[F].mean(axis=1)
+        pairs, _ = mesh.face_adjacency(F)
+        fields = [np.zeros(len(F), dtype=np.int64)]
+        for k in (2, 5, 12, 40):  # blobs around random seed faces, nearest in 3-D
+            seeds = C[rng.choice(len(F), k, replace=False)]
+            fields.append(((C[:, None] - seeds[None]) ** 2).sum(axis=2).argmin(axis=1))
+        for lab in list(fields[1:]):
+            noisy = lab.copy()
+            k = rng.choice(len(pairs), len(pairs) // 10)
+            noisy[pairs[k, 0]] = noisy[pairs[k, 1]]  # islands, holes, bowties
+            fields.append(noisy)
+            merged = lab.copy()
+            merged[merged == lab.max()] = 0  # two blobs as one label: two pieces or an annulus
+            fields.append(merged)
+        for lab in fields:
+            lab = np.unique(lab, return_inverse=True)[1].ravel().astype(np.int64)
+            n = int(lab.max()) + 1
+            want = mesh.disk_labels(F, lab, n, holes=holes)
+            got = mesh.disk_labels(F, lab, n, holes=holes, manifold_edges=mesh.edges(F))
+            assert np.array_equal(got, want)
+            tested += n
+            disks += int(want.sum())
+    assert tested > 500 and 0.2 < disks / tested < 0.9  # both answers well represented
+    # A disk and a closed torus as one label: Euler characteristic 1 + 0 and one boundary loop,
+    # as a disk has; only the count of pieces tells them apart.
+    Vg, Fg = tri_grid(4, 4)
+    Vt, Ft = surfaces[2]
+    F = clean(np.vstack([Vg, Vt + 5.0]), np.vstack([Fg, Ft + len(Vg)])).F
+    lab = np.zeros(len(F), dtype=np.int64)
+    for manifold_edges in (None, mesh.edges(F)):
+        assert not mesh.disk_labels(F, lab, 1, manifold_edges=manifold_edges)[0]
