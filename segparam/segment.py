@@ -56,6 +56,7 @@ from .mesh import (
     corner_angles,
     disk_labels,
     edges,
+    face_adjacency,
     face_areas,
     face_normals,
     is_disk,
@@ -219,17 +220,6 @@ class Segmentation:
     affinity: sp.csr_matrix | None = field(default=None, repr=False, compare=False)
 
 
-def _face_pairs(h2e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`segparam.mesh.face_adjacency` from the half-edge to edge map of
-    :func:`segparam.mesh.edges`, when the caller already has it."""
-    order = np.argsort(h2e, kind="stable")
-    h_sorted = h2e[order]
-    face = order // 3
-    same = h_sorted[1:] == h_sorted[:-1]
-    pairs = np.sort(np.stack([face[:-1][same], face[1:][same]], axis=1), axis=1)
-    return pairs, h_sorted[1:][same]
-
-
 def face_affinity(
     V: np.ndarray,
     F: np.ndarray,
@@ -252,7 +242,7 @@ def face_affinity(
     if edge_index is None:
         edge_index = edges(F)
     E, h2e = edge_index
-    pairs, edge = _face_pairs(h2e)
+    pairs, edge = face_adjacency(F, edge_index=edge_index)
     if len(pairs) == 0:
         return sp.csr_matrix((m, m))
     N = face_normals(V, F)
