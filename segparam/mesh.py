@@ -296,16 +296,22 @@ def corner_angles(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     (m, 3) float64 ndarray
         ``A[f, k]`` is the angle at vertex ``F[f, k]``.
     """
-    P = V[F]
+    # Coordinate by coordinate (0.45 -> 0.22 s at 1M faces): the same sums in the same order as
+    # the row sums of (m, 3) products, from 0.0, so that a degenerate corner's -0.0 dot product
+    # stays +0.0 (arctan2(0, -0.0) is pi)
+    Vt, Ft = np.ascontiguousarray(V.T), np.ascontiguousarray(F.T)
+    P = [Vt[:, Ft[k]] for k in range(3)]  # (dim, m) per corner
     out = np.empty(F.shape)
     for k in range(3):
-        a = P[:, (k + 1) % 3] - P[:, k]
-        b = P[:, (k + 2) % 3] - P[:, k]
-        dot = (a * b).sum(axis=1)
+        a = P[(k + 1) % 3] - P[k]
+        b = P[(k + 2) % 3] - P[k]
         if V.shape[1] == 2:
-            cross = np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+            dot = 0.0 + a[0] * b[0] + a[1] * b[1]
+            cross = np.abs(a[0] * b[1] - a[1] * b[0])
         else:
-            cross = np.linalg.norm(np.cross(a, b), axis=1)
+            dot = 0.0 + a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+            c = (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+            cross = np.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
         out[:, k] = np.arctan2(cross, dot)
     return out
 
