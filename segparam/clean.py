@@ -22,7 +22,7 @@ from scipy.sparse.csgraph import connected_components as _cc
 from scipy.spatial import cKDTree
 
 from .errors import InvalidMeshError
-from .mesh import check_mesh, edges, face_areas, mesh_arrays
+from .mesh import check_mesh, edge_half_edges, edges, face_areas, mesh_arrays
 
 __all__ = [
     "REASON_DUPLICATE",
@@ -519,13 +519,18 @@ def _parity(Fs: np.ndarray, h2e: np.ndarray) -> tuple[np.ndarray, np.ndarray, in
     """
     m = len(Fs)
     flat = Fs.ravel()
-    order = np.argsort(h2e, kind="stable")
-    hs = h2e[order]
     count = np.bincount(h2e)
-    lead = np.ones(len(hs), dtype=bool)
-    lead[1:] = hs[1:] != hs[:-1]
-    i = np.flatnonzero(lead & (count[hs] == 2))
-    ha, hb = order[i], order[i + 1]
+    if count.max(initial=0) <= 2:  # as _split leaves it: the first and last half-edge, no sort
+        first, last = edge_half_edges(h2e, len(count))
+        two = np.flatnonzero(count == 2)
+        ha, hb = first[two], last[two]
+    else:
+        order = np.argsort(h2e, kind="stable")
+        hs = h2e[order]
+        lead = np.ones(len(hs), dtype=bool)
+        lead[1:] = hs[1:] != hs[:-1]
+        i = np.flatnonzero(lead & (count[hs] == 2))
+        ha, hb = order[i], order[i + 1]
     fa, fb = ha // 3, hb // 3
     rel = flat[ha] == flat[hb]  # same direction: the two faces disagree
 
