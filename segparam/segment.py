@@ -227,12 +227,14 @@ def face_affinity(
     concave_weight: float = 1.0,
     convex_weight: float = 0.2,
     edge_index: tuple | None = None,
+    normals: np.ndarray | None = None,
 ) -> sp.csr_matrix:
     """Symmetric face-graph affinity: ``w_ij = (l_ij / mean l) max(exp(-d_ij / mean d), floor)``.
 
     ``d_ij = eta (1 - cos theta_ij)`` with ``theta`` the angle between the two faces' normals and
     ``eta`` the concave or convex weight; ``l_ij`` the length of the shared edge.
-    ``edge_index`` is ``edges(F)`` when the caller already has it.
+    ``edge_index`` is ``edges(F)`` and ``normals`` ``face_normals(V, F)`` when the caller already
+    has them.
 
     Returns
     -------
@@ -245,7 +247,7 @@ def face_affinity(
     pairs, edge = face_adjacency(F, edge_index=edge_index)
     if len(pairs) == 0:
         return sp.csr_matrix((m, m))
-    N = face_normals(V, F)
+    N = face_normals(V, F) if normals is None else normals
     C = V[F].mean(axis=1)
     i, j = pairs[:, 0], pairs[:, 1]
     cos = np.clip((N[i] * N[j]).sum(axis=1), -1.0, 1.0)
@@ -693,7 +695,12 @@ def _round_charts(
 
 
 def feature_regions(
-    V: np.ndarray, F: np.ndarray, W: sp.csr_matrix, feature_angle: float, min_faces: int
+    V: np.ndarray,
+    F: np.ndarray,
+    W: sp.csr_matrix,
+    feature_angle: float,
+    min_faces: int,
+    normals: np.ndarray | None = None,
 ) -> np.ndarray:
     """Regions of the face graph that sharp edges enclose completely.
 
@@ -702,7 +709,7 @@ def feature_regions(
     sharp edges that do not close a curve (noise on a scan, a crease that fades out) separate
     nothing; regions smaller than ``min_faces`` (a face or two fenced in by noise) join the
     neighbour they share most affinity with. On a smooth surface this is the affinity graph's
-    components.
+    components. ``normals`` is ``face_normals(V, F)``, if the caller has it.
 
     Returns
     -------
@@ -710,7 +717,7 @@ def feature_regions(
         Region of every face, ``0 .. r - 1``.
     """
     C = W.tocoo()
-    N = face_normals(V, F)
+    N = face_normals(V, F) if normals is None else normals
     smooth = (N[C.row] * N[C.col]).sum(axis=1) >= np.cos(np.radians(feature_angle))
     G = sp.coo_matrix((np.ones(smooth.sum()), (C.row[smooth], C.col[smooth])), shape=W.shape)
     _, regions = _cc(G.tocsr(), directed=False)
@@ -970,18 +977,20 @@ def segment(
         target = int(np.ceil(curvature / cfg.curvature_per_chart))
         target = max(target, int(np.ceil(m / cfg.max_chart_faces)), 1)
     target = min(target, cfg.max_charts, m)
+    N = face_normals(V, F)  # shared by the affinity, the feature regions and the planar test
     W = face_affinity(
         V,
         F,
         concave_weight=cfg.concave_weight,
         convex_weight=cfg.convex_weight,
         edge_index=edge_index,
+        normals=N,
     )
 
     # Feature regions (the faces of a CAD part) are charted apart; a smooth surface is one region
     # per connected component. Regions of fewer than 16 faces (or 0.2% of a small mesh) are noise
     # and join a neighbour; the wall of a drilled hole in a CAD mesh has 30 or more.
-    comp = feature_regions(V, F, W, cfg.feature_angle, min(16, max(2, int(0.002 * m))))
+    comp = feature_regions(V, F, W, cfg.feature_angle, min(16, max(2, int(0.002 * m))), N)
     n_comp = int(comp.max()) + 1
     area = face_areas(V, F)
     comp_area = np.bincount(comp, weights=area, minlength=n_comp)
@@ -989,7 +998,6 @@ def segment(
     share = np.maximum(1, np.round(target * comp_area / comp_area.sum())).astype(int)
     # A planar region (the face of a CAD part) maps exactly as one chart, whatever its area: the
     # split stage projects it onto its plane (the CAD plate's top and bottom were 6 charts each).
-    N = face_normals(V, F)
     first = np.full(n_comp, m)
     np.minimum.at(first, comp, np.arange(m))
     bent = np.abs(N - N[first[comp]]).max(axis=1) >= PLANAR_TOL
