@@ -4,16 +4,18 @@ This module follows the paper ("Hessian Eigenfunctions for Triangular Mesh Param
 a variant of Hessian LLE (Donoho & Grimes 2003), section by section:
 
 * 3.1 tangent plane at every vertex from the average of its adjacent triangle normals (averaged
-  again over a few rings, ``NORMAL_SMOOTHING``: not in the paper, measured on cortical parcels),
+  again over a few rings, ``NORMAL_SMOOTHING``, and turned where it would project an adjacent
+  triangle flat or flipped, ``FOLD_MIN_COS``: not in the paper, measured on cortical parcels),
   and local coordinates ``(u, v)`` of its neighbourhood ``N_i`` in that plane
-  (:func:`neighbourhoods`, :func:`tangent_frames`);
+  (:func:`neighbourhoods`, :func:`tangent_frames`, :func:`unfolded_normals`);
 * 3.2 quadratic least-squares interpolation on ``N_i``; its quadratic coefficients ``alpha, beta,
   gamma`` give the tangent Hessian (eq. 5) and ``C_i = 4 a a^T + 2 b b^T + 4 g g^T`` (eq. 6)
   (:func:`local_hessians`);
 * 3.3 partition of unity: ``C_i`` is weighted by ``(1/3) sum_j A_ij`` (eq. 8, 9) and scattered into
   the global ``K`` (:func:`hessian_matrix`);
 * 3.4 the two eigenvectors of ``K`` after the constant one are the coordinates (eq. 3)
-  (:func:`hessian_eigenmap`).
+  (:func:`hessian_eigenmap`), unless the second is nearly a function of the first and the third
+  is not (``DEPENDENT_R2``, :func:`explained_by_first`: not in the paper).
 
 Eigenvectors are only defined up to a 2x2 linear map; :func:`isometric_fit` picks the map that makes
 the chart closest to isometric, and :func:`orient` keeps the input winding (no mirrored chart).
@@ -82,7 +84,7 @@ __all__ = [
     "charts_quality",
     "check_chart",
     "classic_hlle_matrix",
-    "dependent_second",
+    "explained_by_first",
     "hessian_eigenmap",
     "hessian_matrix",
     "isometric_fit",
@@ -121,28 +123,28 @@ NORMAL_SMOOTHING = 4
 EXTEND_BOUNDARY_ONLY = True
 #: Least cosine between a vertex's tangent-plane normal and the normal of any of its adjacent
 #: triangles (issue 16; see :func:`unfolded_normals`): below it, the plane is turned towards the
-#: normal that keeps every adjacent triangle best oriented, just far enough. The projection of a
-#: triangle keeps ``cos`` of its area, so 0.35 (70 degrees) keeps a third or more of every adjacent
-#: triangle. Raw map (``refine="none"``) on the 89 parcels of ``bench_solver.py --part quality``
-#: (with ``DEPENDENT_R2``), 0.17 / 0.26 / 0.30 / 0.35 / 0.40 / 0.45 / 0.60: fsaverage5 85 / 86 /
-#: 88 / 88 / 87 / 86 / 87, cortex 84 / 85 / 86 / 85 / 85 / 84 / 81, cortex-ico 85 / 84 / 84 / 85 /
-#: 85 / 85 / 85 of 89 bijective (without it 84 / 85 / 82); held out (seed 1 cortex and
-#: cortex-ico, fsaverage5 cut in 77) the totals are flat from 0.17 to 0.45 (see BENCHMARKS.md).
+#: normal that keeps every adjacent triangle best oriented, just far enough. A triangle projects
+#: with ``cos`` times its area, so 0.35 (70 degrees) keeps a third or more of each. Raw map
+#: (``refine="none"``, with ``DEPENDENT_R2``) on the 89 parcels of ``bench_solver.py --part
+#: quality``, none / 0 / 0.17 / 0.26 / 0.30 / 0.35 / 0.40 / 0.45 / 0.50 / 0.60: fsaverage5 81 / 82
+#: / 84 / 85 / 87 / 87 / 86 / 85 / 85 / 87, cortex 82 / 84 / 84 / 85 / 86 / 86 / 87 / 85 / 85 /
+#: 82, cortex-ico 82 / 83 / 85 / 84 / 85 / 86 / 86 / 85 / 85 / 86 bijective; on three held-out
+#: sets (the cortex sets with seed 1, fsaverage5 cut into 79: 255 charts) 217 / 222 / 237 / 235
+#: / 234 / 234 / 232 / 233 / 233 / 227.
 FOLD_MIN_COS = 0.35
-#: Subgradient steps of the max-min normal search of :func:`unfolded_normals` (its value moves by
-#: less than 1e-3 after 40 on the parcels above), and candidate planes between the averaged
-#: normal and the max-min one.
+#: Subgradient steps of the max-min normal search of :func:`unfolded_normals`, and candidate
+#: planes between the averaged normal and the max-min one.
 MAXMIN_STEPS = 40
 MAXMIN_CANDIDATES = 10
 #: The second eigenvector is replaced by the third when a polynomial of degree
-#: ``DEPENDENT_DEGREE`` in the first explains more than this fraction of its variance (see
-#: :func:`coordinate_pair`; issue 16). Raw map, with ``FOLD_MIN_COS``, on the 89 parcels of
-#: fsaverage5 / cortex / cortex-ico, R^2 above 0.7 / 0.75 / 0.8 / 0.85 / 0.9 / 0.95 / never:
-#: 87 / 87 / 88 / 88 / 88 / 88 / 87, 86 / 85 / 85 / 85 / 85 / 84 / 84, 85 / 86 / 85 / 85 / 84 /
-#: 83 / 82 (one solve of the four smallest per chart, so these differ by a chart or so from the
-#: solver's). Of the 15 charts of six sets that it switched at 0.8, 13 were folded before and
-#: bijective after, and 2 the reverse (the nearest such charts scored 0.77 and 0.81).
-DEPENDENT_R2 = 0.8
+#: ``DEPENDENT_DEGREE`` in the first explains more than this fraction of its variance and less
+#: of the third's (see :func:`explained_by_first`; issue 16). Raw map, with ``FOLD_MIN_COS``, on
+#: the 89 parcels of fsaverage5 / cortex / cortex-ico, threshold 0.6 / 0.65 / 0.7 / 0.75 / 0.8 /
+#: 0.85 / 0.9 / never: 86 / 87 / 87 / 87 / 88 / 88 / 88 / 87, 87 / 86 / 86 / 85 / 85 / 85 / 85 /
+#: 84, 85 / 86 / 86 / 86 / 85 / 85 / 84 / 82 bijective; on the held-out sets of
+#: ``FOLD_MIN_COS`` 232 / 233 / 234 / 234 / 235 / 235 / 234 / 228 of 255. Any threshold from
+#: 0.65 to 0.85 is as good overall; 0.65 and 0.7 bring all three sets to 86 or more.
+DEPENDENT_R2 = 0.7
 DEPENDENT_DEGREE = 4
 
 
@@ -747,35 +749,47 @@ def classic_hlle_matrix(V: np.ndarray, *, n_neighbors: int = 12) -> sp.csr_matri
 # ---------------------------------------------------------------------------------------------
 
 
-def dependent_second(vectors: np.ndarray) -> np.ndarray:
-    """Whether the second coordinate eigenvector is (nearly) a function of the first.
+def explained_by_first(vectors: np.ndarray) -> np.ndarray:
+    """How much of each later eigenvector's variance a function of the first one explains.
 
-    ``vectors`` are the three smallest eigenvectors of ``K`` in ascending order, the constant
-    first, for a stack of charts. On a long curved chart the Hessian energy of a quadratic of the
-    long coordinate can undercut that of the short coordinate (whose Hessian is not zero on a
+    ``vectors`` are the smallest eigenvectors of ``K`` in ascending order, the constant first, for
+    a stack of charts: ``(g, s, k)``. On a long curved chart the Hessian energy of a quadratic of
+    the long coordinate can undercut that of the short coordinate (whose Hessian is not zero on a
     surface that is not developable), and the pair of eq. 3 is then ``h1`` and nearly ``g(h1)``:
-    the map folds the chart over a curve (BENCHMARKS.md, section 1). Such an ``h2`` is flagged
-    when a polynomial of degree ``DEPENDENT_DEGREE`` in ``h1`` explains more than
-    ``DEPENDENT_R2`` of its variance (the test of repeated eigendirections of spectral
-    embeddings: Dsilva et al., "Parsimonious representation of nonlinear dynamical systems
-    through manifold learning", 2018, with a global polynomial instead of a local linear
-    regression).
-
-    Parameters
-    ----------
-    vectors : (g, s, 3) float ndarray
+    the map folds the chart over a curve (BENCHMARKS.md, section 1). For every ``h_j``, ``j >= 2``,
+    this is the ``R^2`` of its least-squares fit by a polynomial of degree ``DEPENDENT_DEGREE`` in
+    ``h1`` (the test of repeated eigendirections of spectral embeddings: Dsilva et al.,
+    "Parsimonious representation of nonlinear dynamical systems through manifold learning", 2018,
+    with a global polynomial instead of a local linear regression).
 
     Returns
     -------
-    (g,) bool ndarray
+    (g, k - 2) float64 ndarray
     """
-    h1 = vectors[:, :, 1] - vectors[:, :, 1].mean(axis=1, keepdims=True)
-    h2 = vectors[:, :, 2] - vectors[:, :, 2].mean(axis=1, keepdims=True)
+    X = vectors - vectors.mean(axis=1, keepdims=True)
+    h1, H = X[:, :, 1], X[:, :, 2:]
     x = h1 / np.maximum(np.sqrt((h1**2).mean(axis=1, keepdims=True)), 1e-300)
-    design = x[:, :, None] ** np.arange(DEPENDENT_DEGREE + 1)  # (g, s, degree + 1)
-    Q = np.linalg.qr(design)[0]
-    residual = h2 - np.einsum("gsk,gk->gs", Q, np.einsum("gsk,gs->gk", Q, h2))
-    return (residual**2).sum(axis=1) < (1 - DEPENDENT_R2) * (h2**2).sum(axis=1)
+    Q = np.linalg.qr(x[:, :, None] ** np.arange(DEPENDENT_DEGREE + 1))[0]  # (g, s, degree + 1)
+    residual = H - Q @ (Q.transpose(0, 2, 1) @ H)
+    return 1 - (residual**2).sum(axis=1) / np.maximum((H**2).sum(axis=1), 1e-300)
+
+
+def _select(vectors: np.ndarray, more) -> np.ndarray:
+    """``vectors`` (the three smallest, ``(g, s, 3)``) with the second coordinate replaced by the
+    third where it is explained by the first above ``DEPENDENT_R2`` and the third is less so.
+    ``more(b)`` gives chart ``b``'s four smallest eigenvectors (``(s, 4)``)."""
+    vectors = vectors.copy()
+    for b in np.flatnonzero(explained_by_first(vectors)[:, 0] > DEPENDENT_R2):  # rare
+        four = more(b)
+        if _second(explained_by_first(four[None])[0]) == 2:
+            vectors[b] = four[:, [0, 1, 3]]
+    return vectors
+
+
+def _second(r2: np.ndarray) -> int:
+    """The eigenvector paired with ``h1`` (1: the second, 2: the third) from the ``R^2`` of
+    ``h2, h3`` on ``h1`` (:func:`explained_by_first`)."""
+    return 2 if r2[0] > DEPENDENT_R2 and r2[1] < r2[0] else 1
 
 
 def _coordinates(vectors: np.ndarray) -> np.ndarray:
@@ -793,7 +807,8 @@ def hessian_eigenmap(
     The near-null space is 3-dimensional (the constant and two coordinates) and nearly degenerate,
     so the three smallest eigenvectors are taken together, the constant is projected out and the
     remaining 2-D span is orthonormalized. When the second coordinate is nearly a function of the
-    first (:func:`dependent_second`), the fourth smallest eigenvector takes its place (unless
+    first and the next is less so (:func:`explained_by_first`, ``DEPENDENT_R2``), the fourth
+    smallest eigenvector takes its place (unless
     ``select=False``: classic HLLE, the paper's baseline, takes the pair of eq. 3 as it is).
     ``guess`` (for example ``[1, x, y, z]``: on a nearly developable chart the coordinates are
     close to the null space) only speeds up the solver.
@@ -805,11 +820,12 @@ def hessian_eigenmap(
         The three smallest eigenvalues of ``K``.
     """
     values, vectors = smallest_eigenpairs(K, 3, seed=seed, guess=guess)
-    if select and K.shape[0] > 4 and dependent_second(vectors[None])[0]:
+    if select and K.shape[0] > 4:
         spare = np.random.default_rng(seed + 1).standard_normal(K.shape[0])
-        guess = np.column_stack([vectors, spare])  # (+ 1 random) a block of 5 for 4 pairs
-        _, more = smallest_eigenpairs(K, 4, seed=seed, guess=guess)
-        vectors = more[:, [0, 1, 3]]
+        start = np.column_stack([vectors, spare])  # (+ 1 random) a block of 5 for 4 pairs
+        vectors = _select(
+            vectors[None], lambda b: smallest_eigenpairs(K, 4, seed=seed, guess=start)[1]
+        )[0]
     return _coordinates(vectors[None])[0], values
 
 
@@ -978,21 +994,27 @@ def _arap(
 FALLBACK_PAIRS = ((0, 2), (1, 3))
 
 
-def _other_pairs(V: np.ndarray, F: np.ndarray, K, frames: np.ndarray, *, seed: int = 0):
+def _other_pairs(
+    V: np.ndarray, F: np.ndarray, K, frames: np.ndarray, *, seed: int = 0, select: bool = True
+):
     """Yield the start maps of ``FALLBACK_PAIRS`` (isometric fit, oriented) for one chart.
 
     The four smallest non-constant eigenvectors of ``K`` (eq. 3 with two more functions): the
     five smallest eigenvectors with the constant projected out, rotated by a Rayleigh-Ritz step
-    so that they come in the order of their Hessian energy.
+    so that they come in the order of their Hessian energy. Where :func:`hessian_eigenmap` took
+    the pair (0, 2) (``select``, ``DEPENDENT_R2``), the pair of eq. 3, (0, 1), takes its place.
     """
     n = len(V)
     if n < 6:
         return
     _, vectors = smallest_eigenpairs(K, 5, seed=seed)
+    pairs = FALLBACK_PAIRS
+    if select and _second(explained_by_first(vectors[None])[0]) == 2:
+        pairs = tuple((0, 1) if pair == (0, 2) else pair for pair in pairs)
     X = vectors - vectors.mean(axis=0)
     U = np.linalg.svd(X, full_matrices=False)[0][:, :4]
     U = U @ np.linalg.eigh(U.T @ (K @ U))[1]
-    for i, j in FALLBACK_PAIRS:
+    for i, j in pairs:
         yield orient(isometric_fit(V, F, U[:, [i, j]], frames), F)
 
 
@@ -1122,7 +1144,8 @@ class HessianSolver:
         args = (frames, refine, refine_iterations, angle_weight, boundary, slim_below)
         uv, quality, refined = _refine_map(self._Vn, self.F, uv, *args)
         if not quality.bijective and refine != "none":
-            for uv_p in _other_pairs(self._Vn, self.F, self.K, frames, seed=seed):
+            select = self.method == "hessian"
+            for uv_p in _other_pairs(self._Vn, self.F, self.K, frames, seed=seed, select=select):
                 uv_p, q_p, _ = _refine_map(self._Vn, self.F, uv_p, *args)
                 if q_p.bijective:
                     uv, quality, refined = uv_p, q_p, True
@@ -1479,8 +1502,9 @@ def _block_eigenmaps(
                 vec = np.empty((len(part), s, 3))
                 for b in range(len(part)):  # loop over the blocks of one batch
                     lam[b], vec[b] = scipy.linalg.eigh(A[b], subset_by_index=[0, 2])
-                for b in np.flatnonzero(dependent_second(vec)):  # rare: see hessian_eigenmap
-                    vec[b] = scipy.linalg.eigh(A[b], subset_by_index=[0, 3])[1][:, [0, 1, 3]]
+                vec = _select(
+                    vec, lambda b, A=A: scipy.linalg.eigh(A[b], subset_by_index=[0, 3])[1]
+                )
                 U = _coordinates(vec)
                 rows = vstart[part][:, None] + np.arange(s)
                 Y[rows] = U

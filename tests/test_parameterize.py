@@ -440,37 +440,47 @@ def test_a_second_eigenvector_that_is_a_function_of_the_first_is_replaced(monkey
     # in the chart-by-chart solver and in the batched one alike.
     import segparam.parameterize as parameterize
     from segparam.linalg import smallest_eigenpairs
-    from segparam.parameterize import dependent_second, solve_charts
+    from segparam.parameterize import DEPENDENT_R2, explained_by_first, solve_charts
+    from segparam.quality import chart_quality, inverse_frames, triangle_frames
     from segparam.synthetic import brain_like_parcels
 
     V, F = brain_like_parcels(
         12, mean_faces=460, min_faces=380, max_faces=560, connectivity="icosahedral", seed=0
     )[2]
     solver = HessianSolver(V, F)
-    assert dependent_second(smallest_eigenpairs(solver.K, 3)[1][None])[0]
+    r2 = explained_by_first(smallest_eigenpairs(solver.K, 4)[1][None])[0]  # of h2, h3 on h1
+    assert r2[0] > DEPENDENT_R2 and r2[1] < r2[0]
     chart = solver.solve(refine="none")
     assert chart.bijective
     maps = solve_charts(V, F, np.zeros(len(V), dtype=np.int64), refine="none")
     assert maps.quality["bijective"][0]
     assert procrustes_residual(maps.uv, chart.uv) < 1e-6 * np.ptp(chart.uv)
+    # the fallback then starts from the pair of eq. 3 instead of the (0, 2) already taken
+    frames = inverse_frames(triangle_frames(solver._Vn, F))
+    first = next(parameterize._other_pairs(solver._Vn, F, solver.K, frames))
+    assert chart_quality(solver._Vn, F, first).n_flipped > 0
+    first = next(parameterize._other_pairs(solver._Vn, F, solver.K, frames, select=False))
+    assert chart_quality(solver._Vn, F, first).bijective
     monkeypatch.setattr(parameterize, "DEPENDENT_R2", 1.0)
     assert not solver.solve(refine="none").bijective
 
 
-def test_dependent_second_flags_a_function_of_the_first():
-    from segparam.parameterize import dependent_second
+def test_explained_by_first_is_the_r2_of_a_function_of_the_first():
+    from segparam.parameterize import DEPENDENT_R2, explained_by_first
 
     rng = np.random.default_rng(0)
     x = rng.uniform(-1, 1, 300)
-    one = np.ones(300)
-    for h2, dependent in (
-        (x**2 - 2 * x**4, True),  # a polynomial of h1
+    cases = [
+        (x**2 - 2 * x**4, True),  # a polynomial of h1: R^2 = 1
         (np.cos(3 * x) + 0.1 * rng.normal(size=300), True),  # a smooth function, noisy
         (rng.uniform(-1, 1, 300), False),  # a second coordinate
         (x**2 + rng.uniform(-1, 1, 300), False),  # a fold of one, over a band's width
-    ):
-        vectors = np.column_stack([one, x, h2])[None]
-        assert dependent_second(vectors)[0] == dependent
+    ]
+    vectors = np.column_stack([np.ones(300), x] + [h for h, _ in cases])[None]
+    r2 = explained_by_first(vectors)[0]
+    assert r2[0] == pytest.approx(1.0)
+    assert list(r2 > DEPENDENT_R2) == [dependent for _, dependent in cases]
+    assert np.all((r2 >= 0) & (r2 <= 1 + 1e-12))
 
 
 def test_unfolded_normals_turn_only_planes_that_fold_an_adjacent_triangle():
