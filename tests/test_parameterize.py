@@ -500,3 +500,23 @@ def test_unfolded_normals_turn_only_planes_that_fold_an_adjacent_triangle():
     assert FOLD_MIN_COS <= out[i, 2] < np.cos(np.radians(60))
     assert out[i, 1] == pytest.approx(0.0, abs=1e-12)  # turned in the plane of tilt and +z
     assert unfolded_normals(V, F, out) is out  # nothing left to turn
+
+
+def test_the_eigenvector_selection_on_a_large_chart_is_the_dense_one(monkeypatch):
+    # Above DENSE_LIMIT the fourth eigenvector comes from the sparse solver, started from the
+    # three already found: forced on a 1,600-vertex strip (every chart switches whose third
+    # eigenvector is less a function of the first than the second), it spans (h1, h3) as the
+    # dense solve does.
+    import segparam.parameterize as parameterize
+    from segparam.linalg import smallest_eigenpairs
+    from segparam.parameterize import hessian_eigenmap
+
+    V, F = folded_strip()
+    solver = HessianSolver(V, F)
+    assert len(V) > 400  # linalg.DENSE_LIMIT
+    monkeypatch.setattr(parameterize, "DEPENDENT_R2", -1.0)
+    Y = hessian_eigenmap(solver.K, guess=np.column_stack([np.ones(len(V)), solver._Vn]))[0]
+    _, vectors = smallest_eigenpairs(solver.K, 4, dense_limit=len(V))
+    X = vectors[:, [1, 3]] - vectors[:, [1, 3]].mean(axis=0)
+    X /= np.linalg.norm(X, axis=0)
+    assert np.linalg.norm(Y @ (Y.T @ X) - X) < 1e-5
