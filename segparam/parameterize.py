@@ -4,16 +4,18 @@ This module follows the paper ("Hessian Eigenfunctions for Triangular Mesh Param
 a variant of Hessian LLE (Donoho & Grimes 2003), section by section:
 
 * 3.1 tangent plane at every vertex from the average of its adjacent triangle normals (averaged
-  again over a few rings, ``NORMAL_SMOOTHING``: not in the paper, measured on cortical parcels),
+  again over a few rings, ``NORMAL_SMOOTHING``, and turned where it would project an adjacent
+  triangle flat or flipped, ``FOLD_MIN_COS``: not in the paper, measured on cortical parcels),
   and local coordinates ``(u, v)`` of its neighbourhood ``N_i`` in that plane
-  (:func:`neighbourhoods`, :func:`tangent_frames`);
+  (:func:`neighbourhoods`, :func:`tangent_frames`, :func:`unfolded_normals`);
 * 3.2 quadratic least-squares interpolation on ``N_i``; its quadratic coefficients ``alpha, beta,
   gamma`` give the tangent Hessian (eq. 5) and ``C_i = 4 a a^T + 2 b b^T + 4 g g^T`` (eq. 6)
   (:func:`local_hessians`);
 * 3.3 partition of unity: ``C_i`` is weighted by ``(1/3) sum_j A_ij`` (eq. 8, 9) and scattered into
   the global ``K`` (:func:`hessian_matrix`);
 * 3.4 the two eigenvectors of ``K`` after the constant one are the coordinates (eq. 3)
-  (:func:`hessian_eigenmap`).
+  (:func:`hessian_eigenmap`), unless the second is nearly a function of the first and the third
+  is not (``DEPENDENT_R2``, :func:`explained_by_first`: not in the paper).
 
 Eigenvectors are only defined up to a 2x2 linear map; :func:`isometric_fit` picks the map that makes
 the chart closest to isometric, and :func:`orient` keeps the input winding (no mirrored chart).
@@ -51,6 +53,7 @@ from .mesh import (
     check_mesh,
     edges,
     face_areas,
+    face_normals,
     is_edge_manifold,
     is_vertex_manifold,
     mesh_arrays,
@@ -81,6 +84,7 @@ __all__ = [
     "charts_quality",
     "check_chart",
     "classic_hlle_matrix",
+    "explained_by_first",
     "hessian_eigenmap",
     "hessian_matrix",
     "isometric_fit",
@@ -91,6 +95,7 @@ __all__ = [
     "quality_records",
     "solve_charts",
     "tangent_frames",
+    "unfolded_normals",
 ]
 
 METHODS = ("hessian", "classic-hlle")
@@ -116,6 +121,31 @@ NORMAL_SMOOTHING = 4
 #: the unextended fit (:func:`local_hessians`) stays benign. Measured on 89 fsaverage5 pial
 #: parcels (``bench_solver.py --parcel-set fsaverage5``), raw map: see BENCHMARKS.md.
 EXTEND_BOUNDARY_ONLY = True
+#: Least cosine between a vertex's tangent-plane normal and the normal of any of its adjacent
+#: triangles (issue 16; see :func:`unfolded_normals`): below it, the plane is turned towards the
+#: normal that keeps every adjacent triangle best oriented, just far enough. A triangle projects
+#: with ``cos`` times its area, so 0.35 (70 degrees) keeps a third or more of each. Raw map
+#: (``refine="none"``, with ``DEPENDENT_R2``) on the 89 parcels of ``bench_solver.py --part
+#: quality``, none / 0 / 0.17 / 0.26 / 0.30 / 0.35 / 0.40 / 0.45 / 0.50 / 0.60: fsaverage5 81 / 82
+#: / 84 / 85 / 87 / 87 / 86 / 85 / 85 / 87, cortex 82 / 84 / 84 / 85 / 86 / 86 / 87 / 85 / 85 /
+#: 82, cortex-ico 82 / 83 / 85 / 84 / 85 / 86 / 86 / 85 / 85 / 86 bijective; on three held-out
+#: sets (the cortex sets with seed 1, fsaverage5 cut into 79: 255 charts) 217 / 222 / 237 / 235
+#: / 234 / 234 / 232 / 233 / 233 / 227.
+FOLD_MIN_COS = 0.35
+#: Subgradient steps of the max-min normal search of :func:`unfolded_normals`, and candidate
+#: planes between the averaged normal and the max-min one.
+MAXMIN_STEPS = 40
+MAXMIN_CANDIDATES = 10
+#: The second eigenvector is replaced by the third when a polynomial of degree
+#: ``DEPENDENT_DEGREE`` in the first explains more than this fraction of its variance and less
+#: of the third's (see :func:`explained_by_first`; issue 16). Raw map, with ``FOLD_MIN_COS``, on
+#: the 89 parcels of fsaverage5 / cortex / cortex-ico, threshold 0.6 / 0.65 / 0.7 / 0.75 / 0.8 /
+#: 0.85 / 0.9 / never: 86 / 87 / 87 / 87 / 88 / 88 / 88 / 87, 87 / 86 / 86 / 85 / 85 / 85 / 85 /
+#: 84, 85 / 86 / 86 / 86 / 85 / 85 / 84 / 82 bijective; on the held-out sets of
+#: ``FOLD_MIN_COS`` 232 / 233 / 234 / 234 / 235 / 235 / 234 / 228 of 255. Any threshold from
+#: 0.65 to 0.85 is as good overall; 0.65 and 0.7 bring all three sets to 86 or more.
+DEPENDENT_R2 = 0.7
+DEPENDENT_DEGREE = 4
 
 
 @dataclass(frozen=True)
@@ -401,6 +431,7 @@ def tangent_frames(
     *,
     tangent: str = "normals",
     smoothing: int = NORMAL_SMOOTHING,
+    min_cos: float | None = FOLD_MIN_COS,
     adjacency: sp.csr_matrix | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """An orthonormal basis ``[b1, b2]`` of the tangent plane ``T_x M`` at every vertex (sec. 3.1).
@@ -412,11 +443,16 @@ def tangent_frames(
     fold or on a chart's boundary give a plane tilted against its neighbours', and the
     projections ``O_i`` of neighbouring vertices then disagree; the averaged planes raised the
     raw map from 72 to 81 of 89 bijective on real fsaverage5 parcels and from 53-55 to 80-82 on
-    the synthetic cortex sets (``NORMAL_SMOOTHING``). ``smoothing=0`` is the paper's plane.
+    the synthetic cortex sets (``NORMAL_SMOOTHING``). Then, where a plane would project one of
+    the vertex's adjacent triangles at more than ``arccos(min_cos)`` from its own normal (nearly
+    flat or folded), the plane is turned just enough (:func:`unfolded_normals`); ``min_cos=None``
+    keeps the averaged planes. ``smoothing=0, min_cos=None`` is the paper's plane.
     ``tangent="pca"`` (classic HLLE): the least-squares plane of ``N_i``.
 
     Parameters
     ----------
+    min_cos : float or None
+        ``FOLD_MIN_COS`` by default (``tangent="normals"`` only).
     adjacency : (n, n) scipy.sparse.csr_matrix, optional
         ``vertex_adjacency(F, n)``, when the caller already has it.
 
@@ -436,9 +472,90 @@ def tangent_frames(
                 total = normal + A @ normal
                 norm = np.linalg.norm(total, axis=1, keepdims=True)
                 normal = np.divide(total, norm, out=normal, where=norm > 1e-12)
+        if min_cos is not None:
+            normal = unfolded_normals(V, F, normal, min_cos)
     else:  # "pca"
         normal = _pca_normals(V, ptr, idx)
     return plane_basis(normal)
+
+
+def _least_cos(normal: np.ndarray, fn: np.ndarray, iv: np.ndarray, jf: np.ndarray, n: int):
+    """Per vertex, the least ``normal[v] . fn[f]`` over the incidences ``(iv, jf)`` (vertex,
+    adjacent face), and a face that attains it."""
+    cos = np.einsum("ij,ij->i", normal[iv], fn[jf])
+    least = np.full(n, np.inf)
+    np.minimum.at(least, iv, cos)
+    worst = np.zeros(n, dtype=np.int64)
+    hit = cos <= least[iv]
+    worst[iv[hit]] = jf[hit]  # any face attaining the minimum
+    return least, worst
+
+
+def unfolded_normals(
+    V: np.ndarray, F: np.ndarray, normal: np.ndarray, min_cos: float = FOLD_MIN_COS
+) -> np.ndarray:
+    """Tangent-plane normals turned so that the plane keeps every adjacent triangle's orientation.
+
+    Section 3.1 projects ``N_i`` onto ``T_x M`` to get the local parameterization ``O_i``, and
+    notes that "local non-bijectivity results in a folding of the surface in the global
+    parameterization". A triangle ``t`` adjacent to ``x_i`` projects onto the plane of normal
+    ``n_i`` with ``n_i . n_t`` times its area, negative when the projection flips it. On folded
+    cortex the averaged planes (``NORMAL_SMOOTHING``) of vertices on sulcal walls can stand at
+    70-90 degrees to some adjacent triangles, which then project flat or flipped, and the raw map
+    flips 1-2 triangles there (BENCHMARKS.md, section 1). At every vertex whose least
+    ``n_i . n_t`` over its adjacent triangles is below `min_cos`: the normal ``m_i`` that
+    maximizes that least cosine (the centre of the smallest spherical cap holding the adjacent
+    normals) is found by ``MAXMIN_STEPS`` subgradient steps from ``n_i`` (each towards the worst
+    triangle's normal, step ``0.5 / sqrt(k)``, best iterate kept), and the new normal is the first
+    of ``normalize((1 - s) n_i + s m_i)``, ``s = 1 / MAXMIN_CANDIDATES, ..., 1``, whose least
+    cosine reaches `min_cos` (``m_i`` itself if none does): the least turn that unfolds the 1-ring.
+    Vertices above `min_cos` keep their plane. Batched over the vertices to turn.
+
+    Parameters
+    ----------
+    V : (n, 3) float ndarray
+    F : (m, 3) int ndarray
+    normal : (n, 3) float ndarray
+        Unit normals (the averaged ones of :func:`tangent_frames`).
+    min_cos : float
+
+    Returns
+    -------
+    (n, 3) float64 ndarray
+        Unit normals; rows of the vertices not turned are `normal`'s.
+    """
+    n = len(V)
+    fn = face_normals(V, F)
+    iv = F.ravel()
+    jf = np.repeat(np.arange(len(F)), 3)
+    least, _ = _least_cos(normal, fn, iv, jf, n)
+    turn = np.flatnonzero(least < min_cos)
+    if len(turn) == 0:
+        return normal
+    local = np.full(n, -1, dtype=np.int64)
+    local[turn] = np.arange(len(turn))
+    keep = local[iv] >= 0
+    iv, jf = local[iv[keep]], jf[keep]  # incidences of the vertices to turn, renumbered
+    start = normal[turn]
+    m, best, best_cos = start.copy(), start.copy(), least[turn].copy()
+    for k in range(MAXMIN_STEPS):  # subgradient ascent on the least cosine, all vertices at once
+        cos, worst = _least_cos(m, fn, iv, jf, len(turn))
+        better = cos > best_cos
+        best[better], best_cos[better] = m[better], cos[better]
+        m = m + (0.5 / np.sqrt(k + 1)) * fn[worst]
+        m /= np.linalg.norm(m, axis=1, keepdims=True)
+    out = best.copy()
+    done = np.zeros(len(turn), dtype=bool)
+    for s in np.arange(1, MAXMIN_CANDIDATES + 1) / MAXMIN_CANDIDATES:
+        c = (1 - s) * start + s * best
+        c /= np.maximum(np.linalg.norm(c, axis=1, keepdims=True), 1e-300)
+        cos, _ = _least_cos(c, fn, iv, jf, len(turn))
+        take = ~done & (cos >= min_cos)
+        out[take] = c[take]
+        done |= take
+    normal = normal.copy()
+    normal[turn] = out
+    return normal
 
 
 # ---------------------------------------------------------------------------------------------
@@ -632,25 +749,84 @@ def classic_hlle_matrix(V: np.ndarray, *, n_neighbors: int = 12) -> sp.csr_matri
 # ---------------------------------------------------------------------------------------------
 
 
+def explained_by_first(vectors: np.ndarray) -> np.ndarray:
+    """How much of each later eigenvector's variance a function of the first one explains.
+
+    ``vectors`` are the smallest eigenvectors of ``K`` in ascending order, the constant first, for
+    a stack of charts: ``(g, s, k)``. On a long curved chart the Hessian energy of a quadratic of
+    the long coordinate can undercut that of the short coordinate (whose Hessian is not zero on a
+    surface that is not developable), and the pair of eq. 3 is then ``h1`` and nearly ``g(h1)``:
+    the map folds the chart over a curve (BENCHMARKS.md, section 1). For every ``h_j``, ``j >= 2``,
+    this is the ``R^2`` of its least-squares fit by a polynomial of degree ``DEPENDENT_DEGREE`` in
+    ``h1`` (the test of repeated eigendirections of spectral embeddings: Dsilva et al.,
+    "Parsimonious representation of nonlinear dynamical systems through manifold learning", 2018,
+    with a global polynomial instead of a local linear regression).
+
+    Returns
+    -------
+    (g, k - 2) float64 ndarray
+    """
+    X = vectors - vectors.mean(axis=1, keepdims=True)
+    h1, H = X[:, :, 1], X[:, :, 2:]
+    x = h1 / np.maximum(np.sqrt((h1**2).mean(axis=1, keepdims=True)), 1e-300)
+    Q = np.linalg.qr(x[:, :, None] ** np.arange(DEPENDENT_DEGREE + 1))[0]  # (g, s, degree + 1)
+    residual = H - Q @ (Q.transpose(0, 2, 1) @ H)
+    return 1 - (residual**2).sum(axis=1) / np.maximum((H**2).sum(axis=1), 1e-300)
+
+
+def _select(vectors: np.ndarray, more) -> np.ndarray:
+    """``vectors`` (the three smallest, ``(g, s, 3)``) with the second coordinate replaced by the
+    third where it is explained by the first above ``DEPENDENT_R2`` and the third is less so.
+    ``more(b)`` gives chart ``b``'s four smallest eigenvectors (``(s, 4)``)."""
+    vectors = vectors.copy()
+    for b in np.flatnonzero(explained_by_first(vectors)[:, 0] > DEPENDENT_R2):  # rare
+        four = more(b)
+        if _second(explained_by_first(four[None])[0]) == 2:
+            vectors[b] = four[:, [0, 1, 3]]
+    return vectors
+
+
+def _second(r2: np.ndarray) -> int:
+    """The eigenvector paired with ``h1`` (1: the second, 2: the third) from the ``R^2`` of
+    ``h2, h3`` on ``h1`` (:func:`explained_by_first`)."""
+    return 2 if r2[0] > DEPENDENT_R2 and r2[1] < r2[0] else 1
+
+
+def _coordinates(vectors: np.ndarray) -> np.ndarray:
+    """The 2-D span of eigenvectors ``[1-ish, h1, h]`` with the constant projected out,
+    orthonormal (``(g, s, 3)`` in, ``(g, s, 2)`` out)."""
+    X = vectors - vectors.mean(axis=1, keepdims=True)
+    return np.linalg.svd(X, full_matrices=False)[0][:, :, :2]
+
+
 def hessian_eigenmap(
-    K: sp.spmatrix, *, seed: int = 0, guess: np.ndarray | None = None
+    K: sp.spmatrix, *, seed: int = 0, guess: np.ndarray | None = None, select: bool = True
 ) -> tuple[np.ndarray, np.ndarray]:
     """Coordinates ``h1, h2`` (orthonormal, orthogonal to 1) from the near-null space of K (eq. 3).
 
     The near-null space is 3-dimensional (the constant and two coordinates) and nearly degenerate,
     so the three smallest eigenvectors are taken together, the constant is projected out and the
-    remaining 2-D span is orthonormalized. ``guess`` (for example ``[1, x, y, z]``: on a nearly
-    developable chart the coordinates are close to the null space) only speeds up the solver.
+    remaining 2-D span is orthonormalized. When the second coordinate is nearly a function of the
+    first and the next is less so (:func:`explained_by_first`, ``DEPENDENT_R2``), the fourth
+    smallest eigenvector takes its place (unless
+    ``select=False``: classic HLLE, the paper's baseline, takes the pair of eq. 3 as it is).
+    ``guess`` (for example ``[1, x, y, z]``: on a nearly developable chart the coordinates are
+    close to the null space) only speeds up the solver.
 
     Returns
     -------
     Y : (n, 2) float64 ndarray
     values : (3,) float64 ndarray
+        The three smallest eigenvalues of ``K``.
     """
     values, vectors = smallest_eigenpairs(K, 3, seed=seed, guess=guess)
-    X = vectors - vectors.mean(axis=0)
-    U = np.linalg.svd(X, full_matrices=False)[0][:, :2]
-    return U, values
+    if select and K.shape[0] > 4:
+        spare = np.random.default_rng(seed + 1).standard_normal(K.shape[0])
+        start = np.column_stack([vectors, spare])  # (+ 1 random) a block of 5 for 4 pairs
+        vectors = _select(
+            vectors[None], lambda b: smallest_eigenpairs(K, 4, seed=seed, guess=start)[1]
+        )[0]
+    return _coordinates(vectors[None])[0], values
 
 
 def _metric_design(
@@ -818,21 +994,27 @@ def _arap(
 FALLBACK_PAIRS = ((0, 2), (1, 3))
 
 
-def _other_pairs(V: np.ndarray, F: np.ndarray, K, frames: np.ndarray, *, seed: int = 0):
+def _other_pairs(
+    V: np.ndarray, F: np.ndarray, K, frames: np.ndarray, *, seed: int = 0, select: bool = True
+):
     """Yield the start maps of ``FALLBACK_PAIRS`` (isometric fit, oriented) for one chart.
 
     The four smallest non-constant eigenvectors of ``K`` (eq. 3 with two more functions): the
     five smallest eigenvectors with the constant projected out, rotated by a Rayleigh-Ritz step
-    so that they come in the order of their Hessian energy.
+    so that they come in the order of their Hessian energy. Where :func:`hessian_eigenmap` took
+    the pair (0, 2) (``select``, ``DEPENDENT_R2``), the pair of eq. 3, (0, 1), takes its place.
     """
     n = len(V)
     if n < 6:
         return
     _, vectors = smallest_eigenpairs(K, 5, seed=seed)
+    pairs = FALLBACK_PAIRS
+    if select and _second(explained_by_first(vectors[None])[0]) == 2:
+        pairs = tuple((0, 1) if pair == (0, 2) else pair for pair in pairs)
     X = vectors - vectors.mean(axis=0)
     U = np.linalg.svd(X, full_matrices=False)[0][:, :4]
     U = U @ np.linalg.eigh(U.T @ (K @ U))[1]
-    for i, j in FALLBACK_PAIRS:
+    for i, j in pairs:
         yield orient(isometric_fit(V, F, U[:, [i, j]], frames), F)
 
 
@@ -950,7 +1132,9 @@ class HessianSolver:
         angle_weight = check_number("angle_weight", angle_weight, low=0)
         t0 = time.perf_counter()
         guess = np.column_stack([np.ones(len(self._Vn)), self._Vn])
-        Y, values = hessian_eigenmap(self.K, seed=seed, guess=guess)
+        Y, values = hessian_eigenmap(
+            self.K, seed=seed, guess=guess, select=self.method == "hessian"
+        )
         t1 = time.perf_counter()
         frames = inverse_frames(triangle_frames(self._Vn, self.F))  # shared by every measure
         B = boundary_edges(self.F)
@@ -960,7 +1144,8 @@ class HessianSolver:
         args = (frames, refine, refine_iterations, angle_weight, boundary, slim_below)
         uv, quality, refined = _refine_map(self._Vn, self.F, uv, *args)
         if not quality.bijective and refine != "none":
-            for uv_p in _other_pairs(self._Vn, self.F, self.K, frames, seed=seed):
+            select = self.method == "hessian"
+            for uv_p in _other_pairs(self._Vn, self.F, self.K, frames, seed=seed, select=select):
                 uv_p, q_p, _ = _refine_map(self._Vn, self.F, uv_p, *args)
                 if q_p.bijective:
                     uv, quality, refined = uv_p, q_p, True
@@ -1317,8 +1502,10 @@ def _block_eigenmaps(
                 vec = np.empty((len(part), s, 3))
                 for b in range(len(part)):  # loop over the blocks of one batch
                     lam[b], vec[b] = scipy.linalg.eigh(A[b], subset_by_index=[0, 2])
-                X = vec - vec.mean(axis=1, keepdims=True)
-                U = np.linalg.svd(X, full_matrices=False)[0][:, :, :2]
+                vec = _select(
+                    vec, lambda b, A=A: scipy.linalg.eigh(A[b], subset_by_index=[0, 3])[1]
+                )
+                U = _coordinates(vec)
                 rows = vstart[part][:, None] + np.arange(s)
                 Y[rows] = U
                 values[part] = lam[:, :3]

@@ -412,8 +412,9 @@ def test_classic_hlle_matrix_of_six_points_is_the_projector_off_affine_functions
 
 def test_a_folded_eigenmap_is_refined_from_the_next_eigenvector_pair(monkeypatch):
     # A parcel of the realistic icosahedral cortex whose paper's pair folds over globally (a
-    # thin curved band): ARAP cannot undo it; refined from the pair (0, 2) it is bijective
-    # (FALLBACK_PAIRS), in the chart-by-chart solver and in the batched one alike.
+    # thin curved band; without the eigenvector selection of DEPENDENT_R2): ARAP cannot undo it;
+    # refined from the pair (0, 2) it is bijective (FALLBACK_PAIRS), in the chart-by-chart solver
+    # and in the batched one alike.
     import segparam.parameterize as parameterize
     from segparam.parameterize import solve_charts
     from segparam.synthetic import brain_like_parcels
@@ -421,6 +422,7 @@ def test_a_folded_eigenmap_is_refined_from_the_next_eigenvector_pair(monkeypatch
     V, F = brain_like_parcels(
         12, mean_faces=460, min_faces=380, max_faces=560, connectivity="icosahedral", seed=0
     )[2]
+    monkeypatch.setattr(parameterize, "DEPENDENT_R2", 1.0)  # the pair of eq. 3, always
     solver = HessianSolver(V, F)
     assert not solver.solve(refine="none").bijective
     chart = solver.solve()
@@ -430,3 +432,91 @@ def test_a_folded_eigenmap_is_refined_from_the_next_eigenvector_pair(monkeypatch
     assert procrustes_residual(maps.uv, chart.uv) < 1e-6 * np.ptp(chart.uv)
     monkeypatch.setattr(parameterize, "FALLBACK_PAIRS", ())
     assert not solver.solve().bijective
+
+
+def test_a_second_eigenvector_that_is_a_function_of_the_first_is_replaced(monkeypatch):
+    # The parcel above: its second eigenvector is nearly a quadratic of the first (the pair of
+    # eq. 3 folds it over a curve); the selection takes the third and the raw map is bijective,
+    # in the chart-by-chart solver and in the batched one alike.
+    import segparam.parameterize as parameterize
+    from segparam.linalg import smallest_eigenpairs
+    from segparam.parameterize import DEPENDENT_R2, explained_by_first, solve_charts
+    from segparam.quality import chart_quality, inverse_frames, triangle_frames
+    from segparam.synthetic import brain_like_parcels
+
+    V, F = brain_like_parcels(
+        12, mean_faces=460, min_faces=380, max_faces=560, connectivity="icosahedral", seed=0
+    )[2]
+    solver = HessianSolver(V, F)
+    r2 = explained_by_first(smallest_eigenpairs(solver.K, 4)[1][None])[0]  # of h2, h3 on h1
+    assert r2[0] > DEPENDENT_R2 and r2[1] < r2[0]
+    chart = solver.solve(refine="none")
+    assert chart.bijective
+    maps = solve_charts(V, F, np.zeros(len(V), dtype=np.int64), refine="none")
+    assert maps.quality["bijective"][0]
+    assert procrustes_residual(maps.uv, chart.uv) < 1e-6 * np.ptp(chart.uv)
+    # the fallback then starts from the pair of eq. 3 instead of the (0, 2) already taken
+    frames = inverse_frames(triangle_frames(solver._Vn, F))
+    first = next(parameterize._other_pairs(solver._Vn, F, solver.K, frames))
+    assert chart_quality(solver._Vn, F, first).n_flipped > 0
+    first = next(parameterize._other_pairs(solver._Vn, F, solver.K, frames, select=False))
+    assert chart_quality(solver._Vn, F, first).bijective
+    monkeypatch.setattr(parameterize, "DEPENDENT_R2", 1.0)
+    assert not solver.solve(refine="none").bijective
+
+
+def test_explained_by_first_is_the_r2_of_a_function_of_the_first():
+    from segparam.parameterize import DEPENDENT_R2, explained_by_first
+
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-1, 1, 300)
+    cases = [
+        (x**2 - 2 * x**4, True),  # a polynomial of h1: R^2 = 1
+        (np.cos(3 * x) + 0.1 * rng.normal(size=300), True),  # a smooth function, noisy
+        (rng.uniform(-1, 1, 300), False),  # a second coordinate
+        (x**2 + rng.uniform(-1, 1, 300), False),  # a fold of one, over a band's width
+    ]
+    vectors = np.column_stack([np.ones(300), x] + [h for h, _ in cases])[None]
+    r2 = explained_by_first(vectors)[0]
+    assert r2[0] == pytest.approx(1.0)
+    assert list(r2 > DEPENDENT_R2) == [dependent for _, dependent in cases]
+    assert np.all((r2 >= 0) & (r2 <= 1 + 1e-12))
+
+
+def test_unfolded_normals_turn_only_planes_that_fold_an_adjacent_triangle():
+    # A flat grid (every triangle normal +z) with every normal +z but one, tilted 80 degrees: only
+    # that one is turned, towards +z, just past FOLD_MIN_COS (candidates in steps of 1/10).
+    from segparam.parameterize import FOLD_MIN_COS, unfolded_normals
+
+    V, F = tri_grid(6, 6)
+    normal = np.tile([0.0, 0.0, 1.0], (len(V), 1))
+    i = 17
+    tilt = np.radians(80)
+    normal[i] = [np.sin(tilt), 0.0, np.cos(tilt)]
+    out = unfolded_normals(V, F, normal)
+    others = np.arange(len(V)) != i
+    np.testing.assert_array_equal(out[others], normal[others])
+    assert np.linalg.norm(out[i]) == pytest.approx(1.0)
+    assert FOLD_MIN_COS <= out[i, 2] < np.cos(np.radians(60))
+    assert out[i, 1] == pytest.approx(0.0, abs=1e-12)  # turned in the plane of tilt and +z
+    assert unfolded_normals(V, F, out) is out  # nothing left to turn
+
+
+def test_the_eigenvector_selection_on_a_large_chart_is_the_dense_one(monkeypatch):
+    # Above DENSE_LIMIT the fourth eigenvector comes from the sparse solver, started from the
+    # three already found: forced on a 1,600-vertex strip (every chart switches whose third
+    # eigenvector is less a function of the first than the second), it spans (h1, h3) as the
+    # dense solve does.
+    import segparam.parameterize as parameterize
+    from segparam.linalg import smallest_eigenpairs
+    from segparam.parameterize import hessian_eigenmap
+
+    V, F = folded_strip()
+    solver = HessianSolver(V, F)
+    assert len(V) > 400  # linalg.DENSE_LIMIT
+    monkeypatch.setattr(parameterize, "DEPENDENT_R2", -1.0)
+    Y = hessian_eigenmap(solver.K, guess=np.column_stack([np.ones(len(V)), solver._Vn]))[0]
+    _, vectors = smallest_eigenpairs(solver.K, 4, dense_limit=len(V))
+    X = vectors[:, [1, 3]] - vectors[:, [1, 3]].mean(axis=0)
+    X /= np.linalg.norm(X, axis=0)
+    assert np.linalg.norm(Y @ (Y.T @ X) - X) < 1e-5
