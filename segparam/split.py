@@ -100,14 +100,14 @@ MIN_SPLIT_GAIN = 7e-4
 #: distortion sits at one spot (a cone of the coarse 2k brain, where a 17-face chart has angle
 #: 1.19) loses most of it when cut there (the 2k brain's bisections kept removed 70-100%), while
 #: a chart that is curved all over keeps most of it in both halves (the icosphere's quarters lose
-#: 60% of it, the torus's 32%, the wavy scan's charts 1-16%): splitting those trades charts for
+#: 60% of it, the torus's 32-36%, the wavy scan's charts 1-16%): splitting those trades charts for
 #: stretch everywhere at once, what ``max_stretch`` is for. Without it (and without the size
 #: limit below), at a gain of 1e-3, the icosphere goes from 4 charts to 8 (xatlas makes 6).
 #: 0.6: the 2k brain 119 charts / angle 1.0637, brain-20k 103; 0.8: 115 / 1.0686, brain-20k 101.
 GAIN_MIN_SHARE = 0.7
 #: ... and the largest chart tried (a bound on the cost): without it no bisection of a chart
 #: above 154 faces was kept on any mesh of ``bench_atlas.py --quick`` (the wavy scan's 66 charts
-#: of 138-1079 faces removed 1-16% of their excess, the icosphere's and the torus's 5,000-face
+#: of 247-1079 faces removed 1-16% of their excess, the icosphere's and the torus's 5,000-face
 #: quarters 60% and 32%), and trying them cost the stage 1.9 s of CPU on the wavy scan (1.4 ->
 #: 3.3 s) and 0.5-0.8 s on the icosphere and the torus.
 GAIN_MAX_FACES = 256
