@@ -166,7 +166,8 @@ class SplitConfig:
         ``"none"`` keeps the paper's map.
     angle_weight : float
         ``refine="slim"``: weight (finite, >= 0) of the conformal term in the refined energy;
-        higher trades L2 stretch for less angle distortion (:func:`segparam.refine.slim_refine`).
+        higher trades L2 stretch for less angle distortion (:func:`segparam.refine.slim_refine`;
+        charts under ``SMALL_CHART_ANGLE_FACES`` faces get ``SMALL_CHART_ANGLE_SCALE`` times it).
 
     Raises
     ------
