@@ -1207,7 +1207,8 @@ def parameterize_chart(
     angle_weight : float
         ``refine="slim"`` only: weight (>= 0) of the conformal term added to the symmetric
         Dirichlet energy (:func:`segparam.refine.slim_refine`); higher trades L2 stretch for
-        less angle distortion.
+        less angle distortion. A chart of fewer than ``refine.SMALL_CHART_ANGLE_FACES`` (32)
+        faces is refined with ``refine.SMALL_CHART_ANGLE_SCALE`` (a quarter) of it.
     slim_below : float, optional
         ``refine="slim"`` only: a map stretching more than this (L2) before the refinement is
         returned unrefined (see :meth:`HessianSolver.solve`).

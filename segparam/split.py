@@ -12,6 +12,11 @@ A planar chart (the face of a CAD part) skips the solver: its projection onto it
 exact isometry the solver would return up to a rigid motion (method ``"planar"``). On the CAD
 plate of ``benchmarks/bench_atlas.py`` (28 planar charts) the stage takes 0.8 s instead of 1.6 s.
 
+Once every chart meets the targets, a small chart whose distortion sits at one spot (a cone of a
+coarse scan) is bisected again when that removes most of it (:func:`_split_for_gain`,
+``min_split_gain``): on the realistic 2k-face brain of ``benchmarks/bench_atlas.py`` 98 -> 111
+charts and angle distortion 1.0845 -> 1.0714 (at the other defaults).
+
 Small charts are mapped in bulk, not one Python round trip each (:func:`_bulk_charts`): every
 chart that is projected on its first try (fewer than ``min_faces`` faces, or planar) is
 projected and checked in one vectorized pass over all of them, and every small chart the solver
@@ -86,6 +91,37 @@ STRETCH_MIN_FACES = SMALL_CHART_FACES
 #: a piece that a split would flatten little (the realistic 20k-face brain had a 7-face piece
 #: whose projection was bijective at L2 3.6, Linf 12; the refinement overlapped it: it is split).
 SMALL_CHART_MAX_STRETCH = 1.25
+#: Default ``SplitConfig.min_split_gain``: after the targets are met, a small chart is bisected
+#: once more (:func:`_split_for_gain`) when that lowers the atlas's distortion excess (atlas
+#: ``L2^2 - 1`` plus angle ``- 1``, :func:`_excess`) by at least this much per chart added, and
+#: by at least ``GAIN_MIN_SHARE`` of the chart's own excess. Measured (``parameterize_charts`` on
+#: the segmentation of ``bench_atlas.py``'s meshes, seed 0; charts / L2 / angle): the realistic
+#: 2k brain 100 / 1.0076 / 1.0820 -> 117 / 1.0062 / 1.0659 (xatlas: 134 / 1.0207 / 1.0573; the
+#: goal, xatlas + 0.02 = 1.0773, was missed), brain-20k 101 / 1.0072 / 1.0443 -> 102 / 1.0070 /
+#: 1.0436; fsaverage5, the wavy scan, the icosphere, the torus, the plate, the sheets and the 300
+#: spheres unchanged. 1e-3: the brain 105 / 1.0069 / 1.0749; 5e-4: 122 / 1.0061 / 1.0634.
+MIN_SPLIT_GAIN = 7e-4
+#: ... and the share of the chart's own excess that its bisection must remove: a chart whose
+#: distortion sits at one spot (a cone of the coarse 2k brain, where a 17-face chart has angle
+#: 1.19) loses most of it when cut there (the 2k brain's bisections kept removed 70-100%), while
+#: a chart that is curved all over keeps most of it in both halves (the icosphere's quarters lose
+#: 60% of it, the torus's 32-36%, the wavy scan's charts 1-16%): splitting those trades charts for
+#: stretch everywhere at once, what ``max_stretch`` is for. Without it (and without the size
+#: limit below), at a gain of 1e-3, the icosphere goes from 4 charts to 8 (xatlas makes 6).
+#: 0.6: the 2k brain 119 charts / angle 1.0637, brain-20k 103; 0.8: 115 / 1.0686, brain-20k 101.
+GAIN_MIN_SHARE = 0.7
+#: ... and the largest chart tried (a bound on the cost): without it no bisection of a chart
+#: above 154 faces was kept on any mesh of ``bench_atlas.py --quick`` (the wavy scan's 66 charts
+#: of 247-1079 faces removed 1-16% of their excess, the icosphere's and the torus's 5,000-face
+#: quarters 60% and 32%), and trying them cost the stage 1.9 s of CPU on the wavy scan (1.4 ->
+#: 3.3 s) and 0.5-0.8 s on the icosphere and the torus.
+GAIN_MAX_FACES = 256
+#: ... and the least excess of its own (``(L2^2 - 1) + (angle - 1)`` of the chart alone) a chart
+#: needs to be tried: a chart this close to an isometry is left whole however large its share
+#: of a small mesh (a 4-face strip folded down its middle, refined to L2 1.0000 / angle 1.0017,
+#: was cut in two). The bisections kept on the 2k brain were of charts of 0.11-0.25, brain-20k's
+#: one of 0.11.
+GAIN_MIN_EXCESS = 0.02
 #: Smaller meshes are parameterized in this process: starting workers costs about a second.
 PARALLEL_MIN_FACES = 100_000
 #: How long stopping the workers waits for the pool's manager thread to end (it takes
@@ -123,6 +159,11 @@ class SplitConfig:
         L2-stretch target (Sander's, finite, >= 1): a bijective chart of at least
         ``STRETCH_MIN_FACES`` faces above it is split too (None: no target). The knob that
         trades charts against stretch (``benchmarks/bench_quality.py`` draws the curve).
+    min_split_gain : float or None
+        After the targets: a chart of at most ``GAIN_MAX_FACES`` faces is bisected once more
+        when that lowers the atlas's distortion excess (``L2^2 - 1`` plus angle ``- 1``, area
+        weighted) by at least this much (finite, >= 0) per chart added and by at least
+        ``GAIN_MIN_SHARE`` of the chart's own excess (None: no such splits).
     min_faces : int
         Pieces with fewer faces (>= 1) skip the solver and use the planar projection.
     n_jobs : int
@@ -133,7 +174,8 @@ class SplitConfig:
         ``"none"`` keeps the paper's map.
     angle_weight : float
         ``refine="slim"``: weight (finite, >= 0) of the conformal term in the refined energy;
-        higher trades L2 stretch for less angle distortion (:func:`segparam.refine.slim_refine`).
+        higher trades L2 stretch for less angle distortion (:func:`segparam.refine.slim_refine`;
+        charts under ``SMALL_CHART_ANGLE_FACES`` faces get ``SMALL_CHART_ANGLE_SCALE`` times it).
 
     Raises
     ------
@@ -147,6 +189,7 @@ class SplitConfig:
     max_depth: int = 6
     max_distortion: float | None = None
     max_stretch: float | None = MAX_STRETCH
+    min_split_gain: float | None = MIN_SPLIT_GAIN
     min_faces: int = 8
     n_jobs: int = 0
     refine: str = "slim"
@@ -164,6 +207,9 @@ class SplitConfig:
             ),
             "max_stretch": check_number("max_stretch", self.max_stretch, low=1, optional=True),
             "min_faces": check_int("min_faces", self.min_faces, low=1),
+            "min_split_gain": check_number(
+                "min_split_gain", self.min_split_gain, low=0, optional=True
+            ),
             "n_jobs": check_int("n_jobs", self.n_jobs, low=0),
             "refine": check_choice("refine", self.refine, REFINES),
             "angle_weight": check_number("angle_weight", self.angle_weight, low=0),
@@ -345,7 +391,9 @@ def parameterize_charts(
     """Map every chart of a segmentation bijectively, splitting the ones that fail.
 
     Small charts are mapped in bulk first (:func:`_bulk_charts`); the others, and the small ones
-    that fail there, go one by one through the solver and its splits.
+    that fail there, go one by one through the solver and its splits. Then the small charts whose
+    bisection removes most of their distortion are bisected (``min_split_gain``,
+    :func:`_split_for_gain`).
 
     Parameters
     ----------
@@ -451,13 +499,116 @@ def parameterize_charts(
             first,
         )
     charts: list[Chart] = []
-    splits = np.zeros(n_src, dtype=np.int64)
     first_pass = np.zeros(n_src, dtype=bool)
     for src in range(n_src):
         pieces, first_pass[src] = final[src]
-        splits[src] = len(pieces) - 1
         charts.extend(pieces)
+    if cfg.min_split_gain is not None:
+        charts = _split_for_gain(V, F, charts, cfg, seed, size, affinity)
+    splits = np.bincount([c.source for c in charts], minlength=n_src) - 1
     return ChartSet(charts=tuple(charts), splits=splits, first_pass_bijective=first_pass)
+
+
+def _excess(charts: list[Chart], area: np.ndarray, *, own: bool = False) -> np.ndarray:
+    """Each chart's part of the atlas's distortion excess: its share of the surface area times
+    ``(L2^2 - 1) + (angle - 1)`` (0 for an isometry; that factor alone with ``own``). The
+    atlas's own excess is the sum: its ``L2^2 - 1`` plus its angle distortion ``- 1`` (the figures
+    of ``segparam.quality.distortion`` once every chart is scaled to its 3-D area, as the packer
+    scales them)."""
+    l2 = np.array([c.quality.l2_stretch for c in charts])
+    angle = np.array([c.quality.angle_distortion for c in charts])
+    if own:
+        return (l2**2 - 1) + (angle - 1)
+    share = np.array([area[c.faces].sum() for c in charts]) / area.sum()
+    return share * ((l2**2 - 1) + (angle - 1))
+
+
+def _split_for_gain(
+    V: np.ndarray,
+    F: np.ndarray,
+    charts: list[Chart],
+    cfg: SplitConfig,
+    seed: int,
+    size: float,
+    affinity: _MeshAffinity,
+) -> list[Chart]:
+    """Bisect, round by round, the charts whose bisection removes most of their distortion: a
+    chart of at most ``GAIN_MAX_FACES`` faces is replaced by the pieces of its two halves (mapped
+    as the stage maps any chart, :func:`_map_groups`) when that lowers the atlas's excess
+    (:func:`_excess`) by at least ``min_split_gain`` per chart added and by at least
+    ``GAIN_MIN_SHARE`` of the chart's own excess; the pieces may be bisected again next round. A
+    chart whose bisection fails the test is kept and not tried again. Each bisection kept lowers
+    the excess by ``min_split_gain`` or more, so there are at most ``excess / min_split_gain`` of
+    them. ``V`` is in the stage's unit frame, the charts in mesh indices and units."""
+    area = face_areas(V, F)
+    tried = np.zeros(len(charts), dtype=bool)
+    while True:
+        ex = _excess(charts, area)
+        nf = np.array([len(c.faces) for c in charts])
+        go = ~tried & (ex >= cfg.min_split_gain) & (nf >= 2) & (nf <= GAIN_MAX_FACES)
+        go &= _excess(charts, area, own=True) >= GAIN_MIN_EXCESS
+        cand = np.flatnonzero(go)
+        if len(cand) == 0:
+            return charts
+        halves = divide_many(affinity.mesh(), [charts[i].faces for i in cand], seed=seed)
+        groups = [[h for h in parts if len(h)] for parts in halves]
+        order = np.concatenate([h for parts in groups for h in parts])
+        bounds = np.r_[0, np.cumsum([len(h) for parts in groups for h in parts])]
+        owner = np.repeat(np.arange(len(cand)), [len(parts) for parts in groups])
+        labels = np.zeros(len(F), dtype=np.int64)
+        labels[order] = np.repeat(np.arange(len(bounds) - 1), np.diff(bounds))
+        mapped = _map_groups(V, F, labels, order, bounds, cfg, seed, size, affinity)
+        now: list[list[Chart]] = [[c] for c in charts]  # what each chart becomes, in place
+        done = tried.tolist()
+        for k, i in enumerate(cand.tolist()):  # loop over the charts bisected
+            parent = charts[i]
+            pieces = [
+                dataclasses.replace(p, source=parent.source, depth=parent.depth + 1 + p.depth)
+                for g in np.flatnonzero(owner == k) for p in mapped[g]
+            ]  # fmt: skip
+            gain = ex[i] - _excess(pieces, area).sum()
+            if gain >= max(cfg.min_split_gain * (len(pieces) - 1), GAIN_MIN_SHARE * ex[i]):
+                now[i] = pieces
+            else:
+                done[i] = True
+        tried = np.repeat(done, [len(c) for c in now])
+        charts = [c for chart in now for c in chart]
+
+
+def _map_groups(
+    V: np.ndarray,
+    F: np.ndarray,
+    labels: np.ndarray,
+    order: np.ndarray,
+    bounds: np.ndarray,
+    cfg: SplitConfig,
+    seed: int,
+    size: float,
+    affinity: _MeshAffinity,
+) -> list[list[Chart]]:
+    """The charts of each face group ``order[bounds[g] : bounds[g + 1]]`` (``labels[order]`` its
+    group), mapped as :func:`parameterize_charts` maps segmentation charts (in bulk where it can,
+    then round by round, in this process): in mesh indices and units; ``source`` and ``depth``
+    are the group's and the depth below it."""
+    n = len(bounds) - 1
+    sources = [order[bounds[s] : bounds[s + 1]] for s in range(n)]
+    sub = _submeshes(F, labels, order, bounds)
+    rejected, bijective = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+    final = _bulk_charts(V, F, sub, order, bounds, cfg, size, rejected, bijective)
+    rest = [s for s in range(n) if s not in final]
+    results = _solve_in_rounds(
+        V, F, rest, sources, sub, affinity, cfg, seed, size, rejected, bijective, None, 0
+    )
+    out = [final[s][0] if s in final else [] for s in range(n)]
+    for s in rest:
+        vertices = sub.of(s)[0]
+        out[s] = [
+            dataclasses.replace(
+                c, faces=sources[s][c.faces], vertices=vertices[c.vertices], uv=c.uv * size
+            )
+            for c in results[s][0]
+        ]
+    return out
 
 
 @dataclass(frozen=True)

@@ -64,6 +64,7 @@ BAD = {
     ("split", "max_depth"): ([6.0, True, "6"], [-1]),
     ("split", "max_distortion"): (["3", True], [0.5, 0, math.inf, math.nan]),
     ("split", "max_stretch"): (["1.01", True], [0.5, 0, math.inf, math.nan]),
+    ("split", "min_split_gain"): (["7e-4", True], [-1e-3, math.inf, math.nan]),
     ("split", "min_faces"): ([8.5, True], [0, -1]),
     ("split", "n_jobs"): ([True, "2", 1.0], [-1]),
     ("split", "refine"): ([1, True], ["SLIM", "lbfgs"]),

@@ -230,8 +230,9 @@ def test_the_stretch_target_trades_charts_for_stretch():
     m = trimesh.creation.icosphere(2)
     V, F = np.asarray(m.vertices), np.asarray(m.faces)
     out = []
-    for target in (None, 1.02, 1.005):
-        a = build_atlas(V, F, FAST.replace(split={"max_stretch": target}), seed=0)
+    for target in (None, 1.02, 1.005):  # the target alone (no bisections for the gain)
+        split = {"max_stretch": target, "min_split_gain": None}
+        a = build_atlas(V, F, FAST.replace(split=split), seed=0)
         d = distortion(a.V[a.uv_vertex], a.uv_F, a.uv)
         assert all(c.quality.bijective for c in a.charts.charts)
         out.append((a.n_charts, d["l2_stretch"]))
@@ -269,7 +270,9 @@ def test_a_stretched_projection_is_refined():
     V = np.stack([x.ravel(), y.ravel(), np.abs(x.ravel() - 1) * np.tan(np.pi / 3)], 1)
     F = np.array([[0, 2, 3], [0, 3, 1], [2, 4, 5], [2, 5, 3]])
     labels = np.zeros(len(F), np.int64)
-    arap = parameterize_charts(V, F, labels, config=SplitConfig(refine="arap")).charts
+    # (no bisection for the gain: cut along the fold, the unrefined strip is two isometries)
+    arap_cfg = SplitConfig(refine="arap", min_split_gain=None)
+    arap = parameterize_charts(V, F, labels, config=arap_cfg).charts
     assert len(arap) == 1 and arap[0].method == "projection"
     assert 1.05 < arap[0].quality.l2_stretch <= SMALL_CHART_MAX_STRETCH
     (slim,) = parameterize_charts(V, F, labels).charts
@@ -301,3 +304,40 @@ def test_slim_below_returns_the_arap_map_of_a_chart_over_the_target() -> None:
     np.testing.assert_allclose(mixed.uv[:n], before.uv[:n])
     np.testing.assert_allclose(mixed.uv[n:], both.uv[n:])
     assert not np.allclose(both.uv[:n], before.uv[:n])
+
+
+def test_a_chart_of_few_faces_is_refined_with_a_quarter_of_the_angle_weight(monkeypatch):
+    import segparam.refine as refine
+
+    scale = refine.SMALL_CHART_ANGLE_SCALE
+    small, big = spherical_cap(4, 5, extent=1.2), spherical_cap(12, 12)
+    assert len(small[1]) < refine.SMALL_CHART_ANGLE_FACES <= len(big[1])
+    starts = []
+    for V, F in (small, big):
+        Vn, uv = normalized_map(V, F)
+        starts.append((Vn, F, uv @ np.array([[1.2, 0.2], [0.0, 0.9]]).T))
+    default = [slim_refine(Vn, F, start, angle_weight=16.0)[0] for Vn, F, start in starts]
+    monkeypatch.setattr(refine, "SMALL_CHART_ANGLE_SCALE", 1.0)  # every chart its full weight
+    quarter = [slim_refine(Vn, F, start, angle_weight=16.0 * scale)[0] for Vn, F, start in starts]
+    assert np.array_equal(default[0], quarter[0])  # the small chart: a quarter of 16
+    assert not np.allclose(default[1], quarter[1], atol=1e-6)  # the big one: 16
+
+
+def test_small_spheres_trade_some_angle_for_less_stretch(monkeypatch):
+    """An 80-face icosphere (a part of spheres-300 in bench_atlas) is mapped as charts of about
+    20 faces: with the full angle weight on them its L2 stretch is higher, its angle distortion
+    lower, than with the quarter weight of small charts."""
+    import segparam.refine as refine
+
+    m = trimesh.creation.icosphere(1)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    out = []
+    for scale in (refine.SMALL_CHART_ANGLE_SCALE, 1.0):
+        monkeypatch.setattr(refine, "SMALL_CHART_ANGLE_SCALE", scale)
+        a = build_atlas(V, F, FAST, seed=0)
+        assert all(c.quality.bijective for c in a.charts.charts)
+        assert max(len(c.faces) for c in a.charts.charts) < refine.SMALL_CHART_ANGLE_FACES
+        d = distortion(a.V[a.uv_vertex], a.uv_F, a.uv)
+        out.append((d["l2_stretch"], d["angle_distortion"]))
+    (l2_small, angle_small), (l2_full, angle_full) = out
+    assert l2_small < l2_full and angle_small > angle_full

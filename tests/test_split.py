@@ -100,6 +100,8 @@ def test_config_errors():
         SplitConfig(max_distortion=0.5)
     with pytest.raises(ConfigError, match="n_jobs"):
         SplitConfig(n_jobs=-1)
+    with pytest.raises(ConfigError, match="min_split_gain"):
+        SplitConfig(min_split_gain=-1e-3)
 
 
 def test_worker_processes_give_the_same_charts(monkeypatch):
@@ -196,3 +198,45 @@ def test_first_pass_counts_bijective_maps_split_for_a_target(cells):
     tight = parameterize_charts(V, F, labels, config=cfg)
     assert tight.splits.any()  # the target split charts the solver had mapped bijectively
     assert tight.first_pass_bijective.all()
+
+
+def _atlas_excess(V, F, cs):
+    from segparam.mesh import face_areas
+    from segparam.split import _excess
+
+    return float(_excess(list(cs.charts), face_areas(V, F)).sum())
+
+
+def test_a_chart_distorted_at_one_spot_is_bisected_for_the_gain():
+    # A flat square with its centre vertex raised: a cone, its distortion around the apex. It
+    # meets the stretch target, but cutting it through the apex removes most of its distortion.
+    from segparam.split import MIN_SPLIT_GAIN
+
+    V, F = tri_grid(10, 10)
+    V = np.c_[V[:, :2], np.zeros(len(V))]
+    V[np.argmin(((V[:, :2] - 0.5) ** 2).sum(axis=1)), 2] = 0.2
+    labels = np.zeros(len(F), dtype=np.int64)
+    plain = parameterize_charts(V, F, labels, config=SplitConfig(min_split_gain=None))
+    cs = parameterize_charts(V, F, labels)
+    check_chart_set(V, F, cs)
+    added = len(cs.charts) - len(plain.charts)
+    assert added >= 1 and cs.splits[0] == len(cs.charts) - 1
+    assert _atlas_excess(V, F, cs) <= _atlas_excess(V, F, plain) - MIN_SPLIT_GAIN * added
+
+
+def test_a_chart_curved_all_over_is_not_bisected_for_the_gain(monkeypatch):
+    # A spherical cap: a bisection leaves most of its distortion in both halves, so it stays
+    # whole, though a bisection would lower the atlas's distortion by more than the gain asked.
+    from meshes import spherical_cap
+
+    import segparam.split as split
+
+    V, F = spherical_cap(10, 10, extent=2.2)
+    labels = np.zeros(len(F), dtype=np.int64)
+    cs = parameterize_charts(V, F, labels)
+    assert len(cs.charts) == 1
+    monkeypatch.setattr(split, "GAIN_MIN_SHARE", 0.0)
+    halves = parameterize_charts(V, F, labels)
+    check_chart_set(V, F, halves)
+    assert len(halves.charts) > 1
+    assert _atlas_excess(V, F, halves) < _atlas_excess(V, F, cs) - split.MIN_SPLIT_GAIN
