@@ -245,6 +245,7 @@ def neighbourhoods(
     min_points: int = MIN_POINTS,
     extra: np.ndarray | None = None,
     adjacency: sp.csr_matrix | None = None,
+    room: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The neighbourhood ``N_i`` of every vertex: itself and its 1-ring, minimally extended.
 
@@ -262,6 +263,10 @@ def neighbourhoods(
         Points to add beyond ``max(min_points, 1-ring size)`` (see :func:`hessian_matrix`).
     adjacency : (n, n) scipy.sparse.csr_matrix, optional
         ``vertex_adjacency(F, n)``, when the caller already has it.
+    room : (n,) int ndarray, optional
+        The vertices of each vertex's component (its chart's, for a union of charts): a vertex
+        that needs more points than that is *starved*. Without ``room`` that raises; with it,
+        the neighbourhood stops at its component's vertices (see :func:`_starved_charts`).
 
     Returns
     -------
@@ -275,6 +280,8 @@ def neighbourhoods(
     need = np.maximum(min_points - 1 - deg, 0)
     if extra is not None:
         need = need + extra
+    if room is not None:
+        need = np.minimum(need, np.maximum(room - 1 - deg, 0))
     ptr = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(1 + deg + need, out=ptr[1:])
     idx, short = _rings(
@@ -691,12 +698,19 @@ def hessian_matrix(
     K : (n, n) scipy.sparse.csr_matrix
         Symmetric positive semi-definite; ``K @ 1 = 0``.
     """
+    return _hessian_matrix(V, F, tangent, min_points, min_rcond)[0]
+
+
+def _hessian_matrix(V, F, tangent, min_points, min_rcond, room=None):
+    """:func:`hessian_matrix`, and which vertices were starved (see :func:`neighbourhoods`'
+    ``room``; all False without it, where a starved vertex raises InvalidMeshError)."""
     extra = np.zeros(len(V), dtype=np.int64)
     on_boundary = np.zeros(len(V), dtype=bool)
     on_boundary[boundary_edges(F).ravel()] = True
     check = None  # vertices whose neighbourhood changed: all of them at first
     A = vertex_adjacency(F, len(V))
-    ptr, idx = neighbourhoods(V, F, min_points=min_points, extra=extra, adjacency=A)
+    nbr = dict(min_points=min_points, adjacency=A, room=room)
+    ptr, idx = neighbourhoods(V, F, extra=extra, **nbr)
     # Averaged-normal frames do not depend on N_i (only their rare flat-vertex fallback uses the
     # first N_i): they are computed once. PCA frames follow every extension.
     b1, b2 = tangent_frames(V, F, ptr, idx, tangent=tangent, adjacency=A)
@@ -708,7 +722,7 @@ def hessian_matrix(
             break
         extra[bad] += 1
         check = np.flatnonzero(bad)
-        ptr, idx = neighbourhoods(V, F, min_points=min_points, extra=extra, adjacency=A)
+        ptr, idx = neighbourhoods(V, F, extra=extra, **nbr)
         if tangent == "pca":
             b1, b2 = tangent_frames(V, F, ptr, idx, tangent=tangent)
     w = vertex_weights(V, F)
@@ -716,7 +730,11 @@ def hessian_matrix(
     for rows, N in _groups(ptr, idx):
         C = local_hessians(V, N, b1[rows], b2[rows])
         blocks.append((N, w[rows][:, None, None] * C))
-    return _scatter(len(V), blocks)
+    starved = np.zeros(len(V), dtype=bool)
+    if room is not None:  # a vertex that needed more points than its chart has, at any round
+        deg = np.diff(A.indptr)
+        starved = np.maximum(min_points - 1 - deg, 0) + extra > room - 1 - deg
+    return _scatter(len(V), blocks), starved
 
 
 def classic_hlle_matrix(V: np.ndarray, *, n_neighbors: int = 12) -> sp.csr_matrix:
@@ -1610,12 +1628,18 @@ class ChartMaps:
     refined : (c,) bool ndarray
         The ARAP refinement was kept.
     eigenvalues : (c, 3) float64 ndarray
+    starved : (c,) bool ndarray
+        Charts too small for a neighbourhood the solver needs (a vertex that needs more points
+        than its chart has, at some extension round): :class:`HessianSolver` raises
+        InvalidMeshError on such a chart alone; here its map is meaningless and ``quality``
+        says it is not bijective.
     """
 
     uv: np.ndarray
     quality: dict
     refined: np.ndarray
     eigenvalues: np.ndarray
+    starved: np.ndarray
 
 
 def solve_charts(
@@ -1644,9 +1668,9 @@ def solve_charts(
     V : (n, 3) float ndarray
     F : (m, 3) int ndarray
         Charts that share no vertex, ordered by chart, every one of which :func:`check_chart`
-        accepts, with at most ``DENSE_LIMIT`` vertices, and enough vertices that every
-        neighbourhood can be extended (``max(MIN_POINTS, 1 + largest degree) + MAX_EXTEND`` or
-        more).
+        accepts, with at most ``DENSE_LIMIT`` vertices. A chart too small for the neighbourhoods
+        the solver needs is reported (``ChartMaps.starved``) rather than raising, as
+        :class:`HessianSolver` does on it alone; the others' maps do not depend on it.
     vert_chart : (n,) int ndarray
         Chart of every vertex: ``0, 0, ..., 1, 1, ...`` (a chart's vertices are consecutive).
     slim_below : float or (n_charts,) float array_like, optional
@@ -1675,7 +1699,8 @@ def solve_charts(
     scale = np.sqrt(_segment_means(face_areas(V, F), fstart, n_faces))
     centre = _chart_sum(vert_chart, V, n_charts) / size[:, None]
     Vn = (V - centre[vert_chart]) / scale[vert_chart][:, None]
-    K = hessian_matrix(Vn, F, tangent=tangent)
+    K, starved = _hessian_matrix(Vn, F, tangent, MIN_POINTS, MIN_RCOND, room=size[vert_chart])
+    starved = np.bincount(vert_chart, weights=starved, minlength=n_charts) > 0
     Y, values = _block_eigenmaps(K, vstart, size)
     frames = inverse_frames(triangle_frames(Vn, F))
     uv = _isometric_fit_charts(Vn, F, Y, frames, vert_chart, n_charts)
@@ -1720,7 +1745,7 @@ def solve_charts(
         # FALLBACK_PAIRS, as HessianSolver.solve; a loop over the few charts still not bijective
         args = (refine, refine_iterations, angle_weight)
         limits = None if slim_below is None else np.broadcast_to(slim_below, (n_charts,))
-        for c in np.flatnonzero(~q["bijective"]):
+        for c in np.flatnonzero(~q["bijective"] & ~starved):
             vs, fs = vstart[c], fstart[c]
             v_c, f_c = slice(vs, vs + size[c]), slice(fs, fs + n_faces[c])
             V_c, F_c, frames_c = Vn[v_c], F[f_c] - vs, frames[f_c]
@@ -1733,6 +1758,7 @@ def solve_charts(
                         q[name][c] = value
                     use_r[c] = True
                     break
+    q["bijective"] = q["bijective"] & ~starved  # no map: HessianSolver would have raised
     low = np.minimum.reduceat(uv, vstart, axis=0)
     uv = (uv - low[vert_chart]) * scale[vert_chart][:, None]
-    return ChartMaps(uv=uv, quality=q, refined=use_r, eigenvalues=values)
+    return ChartMaps(uv=uv, quality=q, refined=use_r, eigenvalues=values, starved=starved)

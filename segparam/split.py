@@ -54,10 +54,8 @@ from .mesh import (
     plane_basis,
     submesh,
     unit_frame,
-    vertex_adjacency,
 )
 from .parameterize import (
-    MAX_EXTEND,
     METHODS,
     MIN_POINTS,
     REFINES,
@@ -800,12 +798,10 @@ def _bulk_charts(
         if rejected is not None:
             rejected[cand[proj[~ok & c_small[proj]]]] = True
     # The solver, on the small non-planar charts (and planar ones whose projection folds).
+    # (A chart too small for the neighbourhoods the solver needs comes back starved and is
+    # rejected, as the solver alone would raise on it: the brain-2k's 8-12-face pieces of the
+    # split rounds were solved one by one for want of MAX_EXTEND spare vertices, most fine.)
     go = solver[cand] & manifold & (topo["loops"] >= 1) & ~planar_ok & ~(c_planar & ~disk)
-    if go.any():
-        deg = np.diff(vertex_adjacency(Fu, len(Vu)).indptr)
-        most = np.zeros(len(cand), dtype=np.int64)
-        np.maximum.at(most, vert_chart, deg)
-        go &= nv[cand] >= np.maximum(MIN_POINTS, most + 1) + MAX_EXTEND  # no starved vertex
     take = np.flatnonzero(go)
     if len(take):
         Vs, Fs, vc = part(take)

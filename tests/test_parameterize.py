@@ -342,6 +342,32 @@ def test_solve_charts_is_the_solver_chart_by_chart(refine, tangent):
             assert getattr(q, name) == pytest.approx(value, rel=1e-9, abs=1e-12), name
 
 
+def test_solve_charts_reports_the_charts_too_small_for_the_solver_and_maps_the_others():
+    from segparam.parameterize import quality_records, solve_charts
+
+    def bent(nx, ny):
+        V, F = tri_grid(nx, ny)
+        return np.c_[V[:, :2], 0.3 * np.sin(3 * V[:, 0]) * V[:, 1]], F
+
+    # strips of two rows: a vertex cannot find 6 points, and the solver alone raises on them
+    charts = [bent(4, 2), bent(3, 3), bent(5, 2), bent(4, 3), spherical_cap(5, 5)]
+    starved = [True, False, True, False, False]
+    V, F, vert_chart = _union(charts)
+    maps = solve_charts(V, F, vert_chart, refine="slim")
+    assert maps.starved.tolist() == starved
+    for k, ((Vc, Fc), q) in enumerate(zip(charts, quality_records(maps.quality), strict=True)):
+        if starved[k]:
+            with pytest.raises(InvalidMeshError, match="cannot find"):
+                parameterize_chart(Vc, Fc, refine="slim")
+            assert not q.bijective
+            continue
+        ref = parameterize_chart(Vc, Fc, refine="slim")
+        assert procrustes_residual(maps.uv[vert_chart == k], ref.uv) < 1e-9 * np.ptp(ref.uv)
+        assert q.bijective == ref.quality.bijective and q.l2_stretch == pytest.approx(
+            ref.quality.l2_stretch, rel=1e-9
+        )
+
+
 def test_charts_quality_is_chart_quality_chart_by_chart():
     from segparam.parameterize import charts_quality, quality_records
     from segparam.quality import chart_quality
