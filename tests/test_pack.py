@@ -341,12 +341,13 @@ def test_angle_steps_keep_the_layout_valid(steps: int) -> None:
     np.testing.assert_allclose(ratio, res.scale**2, rtol=1e-9)
 
 
-def _turns_off_quarter(uvs, transforms) -> np.ndarray:
-    """Per chart, its packed rotation off the quarter turns of its min-area frame (degrees)."""
+def _turns_off(uvs, transforms, period: float) -> np.ndarray:
+    """Per chart, its packed rotation off its min-area frame modulo ``period`` degrees (90: off
+    the frame's quarter turns; 360: off the frame itself), in [0, period / 2]."""
     turn = np.degrees([np.arctan2(A[1, 0], A[0, 0]) for A in transforms])
     frames = np.array([np.degrees(min_area_rotation(uv)[1]) for uv in uvs])
-    off = (turn - frames) % 90
-    return np.minimum(off, 90 - off)
+    off = (turn - frames) % period
+    return np.minimum(off, period - off)
 
 
 def test_round_charts_turn_by_fine_angles_and_rectangles_by_quarter_turns() -> None:
@@ -367,7 +368,7 @@ def test_round_charts_turn_by_fine_angles_and_rectangles_by_quarter_turns() -> N
         config = PackConfig(resolution=resolution, padding=2, angle_steps=3)
         res = pack_charts(uvs, faces, areas, config=config)
         assert_valid_layout(res, faces)
-        off = _turns_off_quarter(uvs, res.transforms)
+        off = _turns_off(uvs, res.transforms, 90)
         assert off[-1] < 1e-6  # the rectangle
         assert np.all(np.isclose(off % 30, 0, atol=1e-6) | np.isclose(off % 30, 30, atol=1e-6))
         fine += int(np.sum(off > 29))
@@ -379,7 +380,7 @@ def test_no_fine_angles_with_one_step_or_without_rotation() -> None:
     configs = [PackConfig(resolution=160, angle_steps=1), PackConfig(resolution=160, rotate=False)]
     for cfg in configs:
         res = pack_charts(uvs, faces, areas, config=cfg)
-        assert np.all(_turns_off_quarter(uvs, res.transforms) < 1e-6)
+        assert np.all(_turns_off(uvs, res.transforms, 90) < 1e-6)
 
 
 def test_a_folded_chart_packs_without_overlap() -> None:
@@ -431,14 +432,6 @@ def test_long_thin_chart_and_wildly_different_areas() -> None:
     np.testing.assert_allclose(ratio, res.scale**2, rtol=1e-9)
 
 
-def _turns_off_frame(uvs, transforms) -> np.ndarray:
-    """Per chart, its packed rotation off its min-area frame, in degrees in [0, 180]."""
-    turn = np.degrees([np.arctan2(A[1, 0], A[0, 0]) for A in transforms])
-    frames = np.array([np.degrees(min_area_rotation(uv)[1]) for uv in uvs])
-    off = (turn - frames) % 360
-    return np.minimum(off, 360 - off)
-
-
 def test_without_rotation_every_chart_keeps_its_minimum_area_frame() -> None:
     # rotate=False: every transform is the rotation into the chart's minimum-area frame (no
     # quarter turn, no finer turn) times a uniform scale, so each packed chart lies wider than
@@ -454,11 +447,11 @@ def test_without_rotation_every_chart_keeps_its_minimum_area_frame() -> None:
     np.testing.assert_allclose(
         A @ A.transpose(0, 2, 1) / det[:, None, None], [np.eye(2)] * 8, atol=1e-12
     )
-    assert np.all(_turns_off_frame(uvs, res.transforms) < 1e-6)
+    assert np.all(_turns_off(uvs, res.transforms, 360) < 1e-6)
     width = np.array([np.ptp(uv, axis=0) for uv in res.uvs])
     assert np.all(width[:, 0] >= width[:, 1] * (1 - 1e-9))
     quarter = PackConfig(resolution=128, angle_steps=1)
-    off = _turns_off_frame(uvs, pack_charts(uvs, faces, areas, config=quarter).transforms)
+    off = _turns_off(uvs, pack_charts(uvs, faces, areas, config=quarter).transforms, 360)
     assert np.isclose(off, 90).any() and np.isclose(off, 180).any()
 
 
