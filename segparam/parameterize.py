@@ -266,7 +266,7 @@ def neighbourhoods(
     room : (n,) int ndarray, optional
         The vertices of each vertex's component (its chart's, for a union of charts): a vertex
         that needs more points than that is *starved*. Without ``room`` that raises; with it,
-        the neighbourhood stops at its component's vertices (see :func:`_starved_charts`).
+        the neighbourhood stops at its component's vertices (see :func:`solve_charts`).
 
     Returns
     -------
@@ -277,9 +277,7 @@ def neighbourhoods(
     n = len(V)
     A = vertex_adjacency(F, n) if adjacency is None else adjacency
     deg = np.diff(A.indptr)
-    need = np.maximum(min_points - 1 - deg, 0)
-    if extra is not None:
-        need = need + extra
+    need = _points_needed(deg, min_points, extra)
     if room is not None:
         need = np.minimum(need, np.maximum(room - 1 - deg, 0))
     ptr = np.zeros(n + 1, dtype=np.int64)
@@ -291,6 +289,13 @@ def neighbourhoods(
     if short >= 0:
         raise InvalidMeshError(f"cannot find {min_points} points around every vertex")
     return ptr, idx
+
+
+def _points_needed(deg: np.ndarray, min_points: int, extra: np.ndarray | None) -> np.ndarray:
+    """Points beyond the 1-ring each neighbourhood takes (:func:`neighbourhoods`): enough to reach
+    ``min_points``, plus ``extra``."""
+    need = np.maximum(min_points - 1 - deg, 0)
+    return need if extra is None else need + extra
 
 
 @njit(cache=True, nogil=True)
@@ -733,7 +738,7 @@ def _hessian_matrix(V, F, tangent, min_points, min_rcond, room=None):
     starved = np.zeros(len(V), dtype=bool)
     if room is not None:  # a vertex that needed more points than its chart has, at any round
         deg = np.diff(A.indptr)
-        starved = np.maximum(min_points - 1 - deg, 0) + extra > room - 1 - deg
+        starved = _points_needed(deg, min_points, extra) > room - 1 - deg
     return _scatter(len(V), blocks), starved
 
 

@@ -320,6 +320,11 @@ def _stop(pool) -> None:
         manager.join(timeout=STOP_JOIN_SECONDS)
 
 
+def _jobs(cfg: SplitConfig) -> int:
+    """Worker processes the config asks for (``n_jobs``; 0: one per CPU)."""
+    return cfg.n_jobs or os.cpu_count() or 1
+
+
 def _warm_worker() -> None:
     """A worker's start: import the solver and load its compiled kernel on a small bent grid,
     before the first chart arrives (about 1 s of imports and 0.3-0.9 s of kernel loading)."""
@@ -345,7 +350,7 @@ def start_workers(config: SplitConfig | None = None):
         it down (:func:`stop_workers`).
     """
     cfg = config or SplitConfig()
-    jobs = cfg.n_jobs or os.cpu_count() or 1
+    jobs = _jobs(cfg)
     if jobs <= 1:
         return None
     pool = _new_pool(jobs)
@@ -443,7 +448,7 @@ def parameterize_charts(
     in_bulk = np.zeros(n_src, dtype=bool)
     in_bulk[list(final)] = True
     rest = np.flatnonzero(~in_bulk).tolist()  # the charts that need the solver alone
-    jobs = cfg.n_jobs or os.cpu_count() or 1
+    jobs = _jobs(cfg)
     parallel = jobs > 1 and len(rest) > 1 and len(F) >= PARALLEL_MIN_FACES
     affinity = _MeshAffinity(V, F, affinity)
 
