@@ -194,18 +194,25 @@ def face_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     return np.divide(c, norm, out=np.zeros_like(c), where=norm > 0)
 
 
-def vertex_normals(V: np.ndarray, F: np.ndarray, *, weighting: str = "uniform") -> np.ndarray:
+def vertex_normals(
+    V: np.ndarray,
+    F: np.ndarray,
+    *,
+    weighting: str = "uniform",
+    face_normal: np.ndarray | None = None,
+) -> np.ndarray:
     """Unit vertex normals: the average of the adjacent triangles' unit normals.
 
     ``weighting="uniform"`` is the paper's choice (section 3.1: the plain average of the adjacent
-    triangle normals); ``"area"`` weights each normal by its triangle's area.
+    triangle normals); ``"area"`` weights each normal by its triangle's area. ``face_normal`` is
+    ``face_normals(V, F)``, when the caller already has it.
 
     Returns
     -------
     (n, 3) float64 ndarray
         Zero rows for unreferenced vertices or where the normals cancel.
     """
-    N = face_normals(V, F)
+    N = face_normals(V, F) if face_normal is None else face_normal
     if weighting == "area":
         N = N * face_areas(V, F)[:, None]
     elif weighting != "uniform":
@@ -727,7 +734,7 @@ def disk_labels(
     (n_labels,) bool ndarray
         False for labels without faces.
     """
-    if manifold_edges is not None:
+    if manifold_edges is not None and len(F):  # (an empty F: the general test)
         n = int(labels.max()) + 1 if n_labels is None else int(n_labels)
         return _manifold_disk_labels(F, np.asarray(labels, np.int64), n, manifold_edges, holes)
     t = label_topology(F, labels, n_labels)

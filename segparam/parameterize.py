@@ -474,7 +474,8 @@ def tangent_frames(
     """
     tangent = check_choice("tangent", tangent, TANGENTS)
     if tangent == "normals":
-        normal = vertex_normals(V, F)
+        fn = face_normals(V, F)  # for the vertex normals and the fold test
+        normal = vertex_normals(V, F, face_normal=fn)
         flat = np.linalg.norm(normal, axis=1) < 0.5  # adjacent normals cancel: fall back to PCA
         if flat.any():
             normal[flat] = _pca_normals(V, ptr, idx)[flat]
@@ -485,7 +486,7 @@ def tangent_frames(
                 norm = np.linalg.norm(total, axis=1, keepdims=True)
                 normal = np.divide(total, norm, out=normal, where=norm > 1e-12)
         if min_cos is not None:
-            normal = unfolded_normals(V, F, normal, min_cos)
+            normal = unfolded_normals(V, F, normal, min_cos, face_normal=fn)
     else:  # "pca"
         normal = _pca_normals(V, ptr, idx)
     return plane_basis(normal)
@@ -504,7 +505,11 @@ def _least_cos(normal: np.ndarray, fn: np.ndarray, iv: np.ndarray, jf: np.ndarra
 
 
 def unfolded_normals(
-    V: np.ndarray, F: np.ndarray, normal: np.ndarray, min_cos: float = FOLD_MIN_COS
+    V: np.ndarray,
+    F: np.ndarray,
+    normal: np.ndarray,
+    min_cos: float = FOLD_MIN_COS,
+    face_normal: np.ndarray | None = None,
 ) -> np.ndarray:
     """Tangent-plane normals turned so that the plane keeps every adjacent triangle's orientation.
 
@@ -530,6 +535,8 @@ def unfolded_normals(
     normal : (n, 3) float ndarray
         Unit normals (the averaged ones of :func:`tangent_frames`).
     min_cos : float
+    face_normal : (m, 3) float ndarray, optional
+        ``face_normals(V, F)``, when the caller already has it.
 
     Returns
     -------
@@ -537,7 +544,7 @@ def unfolded_normals(
         Unit normals; rows of the vertices not turned are `normal`'s.
     """
     n = len(V)
-    fn = face_normals(V, F)
+    fn = face_normals(V, F) if face_normal is None else face_normal
     iv = F.ravel()
     jf = np.repeat(np.arange(len(F)), 3)
     least, _ = _least_cos(normal, fn, iv, jf, n)
