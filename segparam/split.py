@@ -488,19 +488,9 @@ def parameterize_charts(
             progress, len(final),
         )  # fmt: skip
 
-    for src in rest:  # back to mesh indices and units
-        faces = sources[src]
-        vertices = sub.of(src)[0]
+    for src in rest:
         pieces, first = results[src]
-        final[src] = (
-            [
-                dataclasses.replace(
-                    c, faces=faces[c.faces], vertices=vertices[c.vertices], uv=c.uv * size
-                )
-                for c in pieces
-            ],
-            first,
-        )
+        final[src] = (_in_mesh(pieces, sources[src], sub.of(src)[0], size), first)
     charts: list[Chart] = []
     first_pass = np.zeros(n_src, dtype=bool)
     for src in range(n_src):
@@ -604,14 +594,19 @@ def _map_groups(
     )
     out = [final[s][0] if s in final else [] for s in range(n)]
     for s in rest:
-        vertices = sub.of(s)[0]
-        out[s] = [
-            dataclasses.replace(
-                c, faces=sources[s][c.faces], vertices=vertices[c.vertices], uv=c.uv * size
-            )
-            for c in results[s][0]
-        ]
+        out[s] = _in_mesh(results[s][0], sources[s], sub.of(s)[0], size)
     return out
+
+
+def _in_mesh(
+    pieces: list[Chart], faces: np.ndarray, vertices: np.ndarray, size: float
+) -> list[Chart]:
+    """A chart's pieces from :func:`_solve_source` (in the chart's own indices and the stage's
+    unit frame) back in mesh indices and units: ``faces`` and ``vertices`` are the chart's."""
+    return [
+        dataclasses.replace(c, faces=faces[c.faces], vertices=vertices[c.vertices], uv=c.uv * size)
+        for c in pieces
+    ]
 
 
 @dataclass(frozen=True)
