@@ -39,14 +39,13 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
 import scipy.sparse as sp
 from numba import njit
 from scipy.sparse.csgraph import connected_components as graph_components
 from scipy.spatial import cKDTree
 
 from .errors import InvalidMeshError, check_choice, check_int, check_number
-from .linalg import one_blas_thread, smallest_eigenpairs, spd_solver
+from .linalg import lowest_pairs, one_blas_thread, smallest_eigenpairs, spd_solver
 from .mesh import (
     boundary_edges,
     boundary_loops,
@@ -1532,10 +1531,8 @@ def _block_eigenmaps(
                 lam = np.empty((len(part), 3))
                 vec = np.empty((len(part), s, 3))
                 for b in range(len(part)):  # loop over the blocks of one batch
-                    lam[b], vec[b] = scipy.linalg.eigh(A[b], subset_by_index=[0, 2])
-                vec = _select(
-                    vec, lambda b, A=A: scipy.linalg.eigh(A[b], subset_by_index=[0, 3])[1]
-                )
+                    lam[b], vec[b] = lowest_pairs(A[b], 3)
+                vec = _select(vec, lambda b, A=A: lowest_pairs(A[b], 4)[1])
                 U = _coordinates(vec)
                 rows = vstart[part][:, None] + np.arange(s)
                 Y[rows] = U

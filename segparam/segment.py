@@ -49,7 +49,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.special import ive
 
 from .errors import check_int, check_number
-from .linalg import DENSE_LIMIT, one_blas_thread, smallest_eigenpairs, spd_solver
+from .linalg import DENSE_LIMIT, lowest_pairs, one_blas_thread, smallest_eigenpairs, spd_solver
 from .mesh import (
     boundary_edges,
     check_mesh,
@@ -392,7 +392,7 @@ def _halves(faces: np.ndarray, Wg: sp.spmatrix, d: np.ndarray) -> list[np.ndarra
     d_safe = np.where(d > 0, d, 1.0)
     dm = 1 / np.sqrt(d_safe)
     L = np.eye(m) - (dm[:, None] * Wg.toarray()) * dm[None, :]
-    vec = scipy.linalg.eigh(L, subset_by_index=[0, 1])[1]
+    vec = lowest_pairs(L, 2)[1]
     f = vec[:, 1] / np.sqrt(d_safe)
     order = np.argsort(f, kind="stable")
     side = np.zeros(m, dtype=bool)
