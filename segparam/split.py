@@ -325,9 +325,22 @@ def _jobs(cfg: SplitConfig) -> int:
     return cfg.n_jobs or os.cpu_count() or 1
 
 
-def _warm_worker() -> None:
-    """A worker's start: import the solver and load its compiled kernel on a small bent grid,
-    before the first chart arrives (about 1 s of imports and 0.3-0.9 s of kernel loading)."""
+#: The BLAS thread limit of each worker process (kept for the process's life).
+_WORKER_BLAS_LIMIT = []
+
+
+def _warm_worker(blas_threads: int = 1) -> None:
+    """A worker's start: its BLAS threads limited to ``blas_threads`` (the cores left per worker),
+    then the solver imported and its compiled kernel loaded on a small bent grid, before the
+    first chart arrives (about 1 s of imports and 0.3-0.9 s of kernel loading).
+
+    Without the limit each worker's BLAS started a thread per core: on 2 cores, 2 workers ran 4
+    busy threads, and the 1M-face brain's parameterize stage took 21.6 s against 17.3 s with one
+    thread each (``benchmarks/bench_scaling.py --sizes 1000000``, BENCHMARKS.md section 0.1).
+    """
+    from threadpoolctl import threadpool_limits
+
+    _WORKER_BLAS_LIMIT.append(threadpool_limits(blas_threads, user_api="blas"))
     u, v = np.meshgrid(np.linspace(0.0, 1.0, 5), np.linspace(0.0, 1.0, 5))
     V = np.stack([u.ravel(), v.ravel(), 0.3 * (u * v).ravel()], axis=1)
     q = (np.arange(4)[:, None] * 5 + np.arange(4)[None, :]).ravel()  # lower-left corners
@@ -377,7 +390,10 @@ def _new_pool(jobs: int):
     from concurrent.futures import ProcessPoolExecutor
 
     ctx = multiprocessing.get_context("spawn")  # no fork after BLAS threads have started
-    return ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_warm_worker)
+    blas_threads = max(1, (os.cpu_count() or 1) // jobs)
+    return ProcessPoolExecutor(
+        max_workers=jobs, mp_context=ctx, initializer=_warm_worker, initargs=(blas_threads,)
+    )
 
 
 def parameterize_charts(

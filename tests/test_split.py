@@ -122,6 +122,26 @@ def test_worker_processes_give_the_same_charts(monkeypatch):
         assert np.array_equal(a.faces, b.faces) and np.array_equal(a.uv, b.uv)
 
 
+def _worker_blas_threads() -> list[int]:
+    from threadpoolctl import threadpool_info
+
+    return [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
+
+
+@pytest.mark.slow
+def test_workers_share_the_cores_instead_of_each_running_a_blas_thread_per_core():
+    import os
+
+    import segparam.split as split
+
+    pool = split._new_pool(2)
+    try:
+        threads = pool.submit(_worker_blas_threads).result()
+    finally:
+        split.stop_workers(pool)
+    assert threads and all(t == max(1, (os.cpu_count() or 1) // 2) for t in threads)
+
+
 def test_chart_affinity_is_the_mesh_wide_one_restricted_and_built_on_first_use(monkeypatch):
     import segparam.split as split
     from segparam.segment import face_affinity
