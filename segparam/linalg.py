@@ -145,12 +145,28 @@ class FixedPattern:
         Entries of the lower triangle (``rows >= cols``), repeats allowed (they are summed).
     n : int
         Size of the matrix.
+    slots : (slot, pattern_rows, pattern_cols) of int ndarrays, optional
+        The layout a caller that knows its pattern's structure computed without sorting the
+        entries (:func:`segparam.refine.mesh_pattern`): every entry's slot, and the distinct
+        entries in column-major order (rows ascending within a column), exactly what
+        ``np.unique`` of the entries' column-major keys gives. ``rows`` and ``cols`` are then
+        not read.
     """
 
-    def __init__(self, rows: np.ndarray, cols: np.ndarray, n: int) -> None:
-        key = np.asarray(cols, dtype=np.int64) * n + np.asarray(rows, dtype=np.int64)
-        unique, self._slot = np.unique(key, return_inverse=True)  # column-major: CSC order
-        self._rows, self._cols = unique % n, unique // n
+    def __init__(
+        self,
+        rows: np.ndarray,
+        cols: np.ndarray,
+        n: int,
+        *,
+        slots: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    ) -> None:
+        if slots is None:
+            key = np.asarray(cols, dtype=np.int64) * n + np.asarray(rows, dtype=np.int64)
+            unique, slot = np.unique(key, return_inverse=True)  # column-major: CSC order
+            slots = (slot, unique % n, unique // n)
+        # the entries' slots in the pattern, and the pattern's rows and columns (CSC order)
+        self._slot, self._rows, self._cols = slots
         self.n = int(n)
         self._symbolic = None
         self._matrix = None  # the cvxopt matrix: its values are replaced, its pattern kept

@@ -341,3 +341,36 @@ def test_small_spheres_trade_some_angle_for_less_stretch(monkeypatch):
         out.append((d["l2_stretch"], d["angle_distortion"]))
     (l2_small, angle_small), (l2_full, angle_full) = out
     assert l2_small < l2_full and angle_small > angle_full
+
+
+def _unique_layout(local: np.ndarray, m: int):
+    """The proxy system's entries (as ``_ProxySystem`` lists them) and their layout by sorting:
+    ``np.unique`` of the column-major keys, what ``FixedPattern`` computes without ``slots``."""
+    a, b, i, j = (x.ravel() for x in np.indices((2, 2, 3, 3)))
+    rows, cols = local[:, i] + a * m, local[:, j] + b * m
+    entry = np.flatnonzero(rows >= cols)
+    rows = np.concatenate([rows.ravel()[entry], np.arange(2 * m)])
+    cols = np.concatenate([cols.ravel()[entry], np.arange(2 * m)])
+    unique, slot = np.unique(cols * (2 * m) + rows, return_inverse=True)
+    return entry, (slot, unique % (2 * m), unique // (2 * m))
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_the_proxy_pattern_read_off_the_edges_is_the_sorted_one(seed):
+    from segparam.refine import mesh_pattern
+
+    rng = np.random.default_rng(seed)
+    if seed == 0:  # a regular grid
+        _, local = tri_grid(6, 5)
+    else:  # a face soup: non-manifold edges, repeated faces, any vertex order
+        n = int(rng.integers(3, 30))
+        local = np.array([rng.choice(n, 3, replace=False) for _ in range(rng.integers(1, 50))])
+    m = int(local.max()) + 1
+    used = np.zeros(m, dtype=bool)
+    used[local] = True
+    local = (np.cumsum(used) - 1)[local]  # every vertex in a face, as in the proxy system
+    m = int(used.sum())
+    entry, expected = _unique_layout(local, m)
+    for got, want in zip(mesh_pattern(local, m, entry), expected, strict=True):
+        np.testing.assert_array_equal(got, want)
+    assert mesh_pattern(np.array([[0, 1, 1]]), 2, entry[:0]) is None  # a repeated vertex
