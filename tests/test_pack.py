@@ -420,6 +420,35 @@ def test_many_tiny_charts() -> None:
     assert res.utilization > 0.3
 
 
+def test_many_charts_start_the_scale_search_near_its_answer(monkeypatch) -> None:
+    """With ``_MODEL_CHARTS`` charts or more, the first scale tried comes from their areas and
+    padding (``_first_scale``), within a few percent of the scale the search ends at on 600
+    random triangles, where the fixed fraction of the bound overshoots by more than 10%; with
+    fewer charts the search starts from that fraction."""
+    from segparam import pack
+
+    rng = np.random.default_rng(0)
+    uvs = [rng.normal(0.0, 1.0, (3, 2)) for _ in range(600)]
+    twice = [(u[1, 0] - u[0, 0]) * (u[2, 1] - u[0, 1]) - (u[1, 1] - u[0, 1]) * (u[2, 0] - u[0, 0])
+             for u in uvs]  # fmt: skip
+    faces = [np.array([[0, 1, 2]] if t > 0 else [[0, 2, 1]]) for t in twice]
+    areas = [0.5 * abs(t) for t in twice]
+    tried = []
+    real = pack._trial_at_scale
+    monkeypatch.setattr(
+        pack, "_trial_at_scale", lambda *a: tried.append(a[3]) or real(*a)
+    )  # a[3]: the scale
+    res = pack_charts(uvs, faces, areas)
+    assert footprint_conflicts(res.uvs, faces, resolution=1024, padding=2) == 0
+    final = res.scale * 1024
+    hi = pack._scale_bounds(pack._prepare(uvs, faces, areas), 1024, 2)
+    assert abs(tried[0] / final - 1) < 0.05
+    assert pack._FIRST_GUESS * hi / final > 1.10
+    assert pack._first_scale(pack._prepare(uvs[:50], faces[:50], areas[:50]), 1024, 2, hi) == (
+        pack._FIRST_GUESS * hi
+    )
+
+
 def test_long_thin_chart_and_wildly_different_areas() -> None:
     strip, Fs = grid(200, 1)
     big, Fb = disc()
