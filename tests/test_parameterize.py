@@ -456,6 +456,21 @@ def test_a_folded_eigenmap_is_refined_from_the_next_eigenvector_pair(monkeypatch
     maps = solve_charts(V, F, np.zeros(len(V), dtype=np.int64))
     assert maps.quality["bijective"][0] and maps.refined[0]
     assert procrustes_residual(maps.uv, chart.uv) < 1e-6 * np.ptp(chart.uv)
+    # in a batch: this parcel twice around one the paper's pair maps (the fallback refines the
+    # failing charts together), each chart the one-by-one solver's map
+    parcels = brain_like_parcels(
+        12, mean_faces=460, min_faces=380, max_faces=560, connectivity="icosahedral", seed=0
+    )
+    pieces = [(V, F), parcels[0], (V, F)]
+    offsets = np.cumsum([0] + [len(p[0]) for p in pieces])
+    Vb = np.concatenate([p[0] for p in pieces])
+    Fb = np.concatenate([p[1] + o for p, o in zip(pieces, offsets, strict=False)])
+    maps = solve_charts(Vb, Fb, np.repeat(np.arange(3), np.diff(offsets)))
+    assert maps.quality["bijective"].all() and maps.refined[[0, 2]].all()
+    for c, (Vc, Fc) in enumerate(pieces):
+        alone = HessianSolver(Vc, Fc).solve()
+        uv_c = maps.uv[offsets[c] : offsets[c + 1]]
+        assert procrustes_residual(uv_c, alone.uv) < 1e-6 * np.ptp(alone.uv)
     monkeypatch.setattr(parameterize, "FALLBACK_PAIRS", ())
     assert not solver.solve().bijective
 
