@@ -1651,6 +1651,92 @@ class ChartMaps:
     starved: np.ndarray
 
 
+def _refine_charts(
+    Vn, F, uv, vert_chart, vstart, n_faces, frames, refine, refine_iterations, angle_weight,
+    slim_below,
+):  # fmt: skip
+    """:func:`_refine_map` of every chart of a disjoint union (:func:`solve_charts`' layout), all
+    at once: returns (uv, quality, refined)."""
+    n_charts = len(vstart)
+    q = charts_quality(Vn, F, uv, vert_chart, n_charts, frames)
+    use_r = np.zeros(n_charts, dtype=bool)
+    if refine in ("arap", "slim"):
+        uv_r, steps = _arap_charts(
+            Vn, F, uv, vert_chart, vstart, n_charts, iterations=refine_iterations,
+            inv_frames=frames,
+        )  # fmt: skip
+        if steps.any():
+            q_r = charts_quality(Vn, F, uv_r, vert_chart, n_charts, frames)
+            use_r = (steps > 0) & (
+                q_r["bijective"] | (~q["bijective"] & (q_r["n_flipped"] < q["n_flipped"]))
+            )
+            q = {k: np.where(use_r, q_r[k], q[k]) for k in q}
+            uv = np.where(use_r[vert_chart][:, None], uv_r, uv)
+    if refine == "slim":
+        go = (q["n_flipped"] == 0) & (q["n_degenerate"] == 0)  # others: energy infinite
+        if slim_below is not None:
+            go &= q["l2_stretch"] <= slim_below
+        uv_s, moved = slim_refine(
+            Vn, F, uv, vert_chart=vert_chart, n_charts=n_charts, inv_frames=frames, charts=go,
+            angle_weight=angle_weight,
+        )  # fmt: skip
+        if moved.any():
+            q_s = charts_quality(Vn, F, uv_s, vert_chart, n_charts, frames)
+            use_s = (
+                (moved > 0)
+                & q_s["bijective"]
+                & (
+                    (n_faces >= SMALL_CHART_FACES)
+                    | (q_s["l2_stretch"] <= q["l2_stretch"] + MAX_STRETCH_INCREASE)
+                )
+            )
+            q = {k: np.where(use_s, q_s[k], q[k]) for k in q}
+            uv = np.where(use_s[vert_chart][:, None], uv_s, uv)
+            use_r |= use_s
+    return uv, q, use_r
+
+
+def _fallback_pairs(Vn, F, K, vstart, fstart, frames, uv, q, refined, starved, args):
+    """``FALLBACK_PAIRS`` for the charts of a :func:`solve_charts` union that are still not
+    bijective (and not starved), as :meth:`HessianSolver.solve` tries them on one chart: each
+    chart's start maps from its next eigenvector pairs (:func:`_other_pairs`, one small dense
+    problem per chart), then every chart's first pair refined together, then the second pair of
+    those still not bijective. The first bijective map is kept: ``uv``, ``q`` and ``refined``
+    are updated in place."""
+    fail = np.flatnonzero(~q["bijective"] & ~starved)
+    if len(fail) == 0:
+        return
+    size = np.diff(np.r_[vstart, len(Vn)])
+    n_faces = np.diff(np.r_[fstart, len(F)])
+    starts = {}
+    for c in fail.tolist():  # loop over the few charts left: their next eigenvector pairs
+        v_c = slice(vstart[c], vstart[c] + size[c])
+        F_c = F[fstart[c] : fstart[c] + n_faces[c]] - vstart[c]
+        frames_c = frames[fstart[c] : fstart[c] + n_faces[c]]
+        starts[c] = list(_other_pairs(Vn[v_c], F_c, K[v_c, v_c], frames_c))
+    refine, refine_iterations, angle_weight, slim_below = args
+    limits = None if slim_below is None else np.broadcast_to(slim_below, (len(vstart),))
+    for t in range(len(FALLBACK_PAIRS)):  # loop over the pairs
+        todo = np.array([c for c in fail.tolist() if t < len(starts[c]) and not q["bijective"][c]])
+        if len(todo) == 0:
+            break
+        verts = np.concatenate([np.arange(vstart[c], vstart[c] + size[c]) for c in todo])
+        faces = np.concatenate([np.arange(fstart[c], fstart[c] + n_faces[c]) for c in todo])
+        local = np.empty(len(Vn), dtype=np.int64)
+        local[verts] = np.arange(len(verts))
+        vc = np.repeat(np.arange(len(todo)), size[todo])
+        uv_t, q_t, _ = _refine_charts(
+            Vn[verts], local[F[faces]], np.concatenate([starts[c][t] for c in todo]), vc,
+            np.r_[0, np.cumsum(size[todo])[:-1]], n_faces[todo], frames[faces], refine,
+            refine_iterations, angle_weight, None if limits is None else limits[todo],
+        )  # fmt: skip
+        ok = q_t["bijective"]
+        uv[verts[ok[vc]]] = uv_t[ok[vc]]
+        for name in q:
+            q[name][todo[ok]] = q_t[name][ok]
+        refined[todo[ok]] = True
+
+
 def solve_charts(
     V: np.ndarray,
     F: np.ndarray,
@@ -1715,58 +1801,10 @@ def solve_charts(
     uv = _isometric_fit_charts(Vn, F, Y, frames, vert_chart, n_charts)
     mirror = _chart_sum(face_chart, signed_areas(uv, F), n_charts) < 0  # orient()
     uv[mirror[vert_chart], 0] *= -1.0
-    q = charts_quality(Vn, F, uv, vert_chart, n_charts, frames)
-    use_r = np.zeros(n_charts, dtype=bool)
-    if refine in ("arap", "slim"):
-        uv_r, steps = _arap_charts(
-            Vn, F, uv, vert_chart, vstart, n_charts, iterations=refine_iterations,
-            inv_frames=frames,
-        )  # fmt: skip
-        if steps.any():
-            q_r = charts_quality(Vn, F, uv_r, vert_chart, n_charts, frames)
-            use_r = (steps > 0) & (
-                q_r["bijective"] | (~q["bijective"] & (q_r["n_flipped"] < q["n_flipped"]))
-            )
-            q = {k: np.where(use_r, q_r[k], q[k]) for k in q}
-            uv = np.where(use_r[vert_chart][:, None], uv_r, uv)
-    if refine == "slim":
-        go = (q["n_flipped"] == 0) & (q["n_degenerate"] == 0)  # others: energy infinite
-        if slim_below is not None:
-            go &= q["l2_stretch"] <= slim_below
-        uv_s, moved = slim_refine(
-            Vn, F, uv, vert_chart=vert_chart, n_charts=n_charts, inv_frames=frames, charts=go,
-            angle_weight=angle_weight,
-        )  # fmt: skip
-        if moved.any():
-            q_s = charts_quality(Vn, F, uv_s, vert_chart, n_charts, frames)
-            use_s = (
-                (moved > 0)
-                & q_s["bijective"]
-                & (
-                    (n_faces >= SMALL_CHART_FACES)
-                    | (q_s["l2_stretch"] <= q["l2_stretch"] + MAX_STRETCH_INCREASE)
-                )
-            )
-            q = {k: np.where(use_s, q_s[k], q[k]) for k in q}
-            uv = np.where(use_s[vert_chart][:, None], uv_s, uv)
-            use_r |= use_s
+    args = (refine, refine_iterations, angle_weight, slim_below)
+    uv, q, use_r = _refine_charts(Vn, F, uv, vert_chart, vstart, n_faces, frames, *args)
     if refine != "none":
-        # FALLBACK_PAIRS, as HessianSolver.solve; a loop over the few charts still not bijective
-        args = (refine, refine_iterations, angle_weight)
-        limits = None if slim_below is None else np.broadcast_to(slim_below, (n_charts,))
-        for c in np.flatnonzero(~q["bijective"] & ~starved):
-            vs, fs = vstart[c], fstart[c]
-            v_c, f_c = slice(vs, vs + size[c]), slice(fs, fs + n_faces[c])
-            V_c, F_c, frames_c = Vn[v_c], F[f_c] - vs, frames[f_c]
-            limit = None if limits is None else float(limits[c])
-            for uv_p in _other_pairs(V_c, F_c, K[v_c, v_c], frames_c):
-                uv_p, q_p, _ = _refine_map(V_c, F_c, uv_p, frames_c, *args, slim_below=limit)
-                if q_p.bijective:
-                    uv[v_c] = uv_p
-                    for name, value in q_p.as_dict().items():
-                        q[name][c] = value
-                    use_r[c] = True
-                    break
+        _fallback_pairs(Vn, F, K, vstart, fstart, frames, uv, q, use_r, starved, args)
     q["bijective"] = q["bijective"] & ~starved  # no map: HessianSolver would have raised
     low = np.minimum.reduceat(uv, vstart, axis=0)
     uv = (uv - low[vert_chart]) * scale[vert_chart][:, None]
