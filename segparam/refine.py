@@ -257,9 +257,14 @@ def slim_refine(
     few = np.bincount(fc, minlength=n_charts)[fc] < SMALL_CHART_ANGLE_FACES
     weight = angle_weight * np.where(few, SMALL_CHART_ANGLE_SCALE, 1.0)
 
-    def energy(x: np.ndarray) -> np.ndarray:
-        e = area * _energy_terms(jacobians(V, F, x, frames), weight)
-        return np.bincount(fc, weights=e, minlength=n_charts) / total
+    def energy(x: np.ndarray, faces: np.ndarray | None = None) -> np.ndarray:
+        """Each chart's energy at the map ``x``; only the charts of ``faces`` (all of their
+        faces, in order) when given, the others 0."""
+        if faces is None:
+            e = area * _energy_terms(jacobians(V, F, x, frames), weight)
+            return np.bincount(fc, weights=e, minlength=n_charts) / total
+        e = area[faces] * _energy_terms(jacobians(V, F[faces], x, frames[faces]), weight[faces])
+        return np.bincount(fc[faces], weights=e, minlength=n_charts) / total
 
     E = energy(uv)
     active = np.isfinite(E) & (E - 4.0 > SLIM_FLOOR)
@@ -291,16 +296,17 @@ def slim_refine(
         tau_max = _segment_min(fc[faces], _step_bound(uv, d, F[faces]), n_charts)
         tau = np.where(active, np.minimum(1.0, STEP_FRACTION * tau_max), 0.0)
         new_E = np.full(n_charts, np.inf)
-        trial = active.copy()
+        trial, trial_faces = active.copy(), faces
         for _ in range(MAX_HALVINGS):  # loop over step halvings, all charts at once
             cand = uv + tau[vc][:, None] * d
-            e = energy(cand)
+            e = energy(cand, trial_faces)  # the charts still trying only
             ok = trial & (e < E)
             new_E = np.where(ok, e, new_E)
             uv = np.where(ok[vc][:, None], cand, uv)
             trial &= ~ok
             if not trial.any():
                 break
+            trial_faces = np.flatnonzero(trial[fc])
             tau = np.where(trial, tau / 2, tau)
         moved = np.isfinite(new_E)
         excess = np.maximum(E - 4.0, 1e-12)  # 4: the isometry's energy, the least possible
