@@ -370,28 +370,34 @@ def divide_many(
         )
         _, comp = _cc(sub, directed=False)
         d = np.asarray(sub.sum(axis=1)).ravel()
+        # each group's rows of `sub` hold its entries only: its dense block is read off them,
+        # without a sparse slice per group (0.1 ms each; 600 sphere halves: 0.09 s)
+        row = np.repeat(np.arange(len(every)), np.diff(sub.indptr))
         with one_blas_thread():
             for j, i in enumerate(small):  # loop over small groups: one dense eigh each
                 a, b = int(bounds[j]), int(bounds[j + 1])
                 faces, c = groups[i], comp[a:b]
-                labels, first = np.unique(c, return_index=True)
-                if len(labels) > 1:  # components, numbered as connected_components numbers them
+                if np.any(c != c[0]):  # components, numbered as connected_components numbers them
+                    labels, first = np.unique(c, return_index=True)
                     out[i] = [faces[c == k] for k in labels[np.argsort(first)]]
                     continue
-                out[i] = _halves(faces, sub[a:b, a:b], d[a:b])
+                block = np.zeros((b - a, b - a))
+                e = slice(sub.indptr[a], sub.indptr[b])
+                block[row[e] - a, sub.indices[e] - a] = sub.data[e]
+                out[i] = _halves(faces, block, d[a:b])
     return out  # type: ignore[return-value]
 
 
-def _halves(faces: np.ndarray, Wg: sp.spmatrix, d: np.ndarray) -> list[np.ndarray]:
-    """:func:`fiedler_bisect`'s halves of a small connected set (its affinity ``Wg``, row sums
-    ``d``), on a dense matrix: the same normalized Laplacian, entry for entry."""
+def _halves(faces: np.ndarray, Wg: np.ndarray, d: np.ndarray) -> list[np.ndarray]:
+    """:func:`fiedler_bisect`'s halves of a small connected set (its dense affinity ``Wg``, row
+    sums ``d``): the same normalized Laplacian, entry for entry."""
     m = len(faces)
     if m <= 2:
         side = np.arange(m) == 0
         return [faces[side], faces[~side]]
     d_safe = np.where(d > 0, d, 1.0)
     dm = 1 / np.sqrt(d_safe)
-    L = np.eye(m) - (dm[:, None] * Wg.toarray()) * dm[None, :]
+    L = np.eye(m) - (dm[:, None] * Wg) * dm[None, :]
     vec = lowest_pairs(L, 2)[1]
     f = vec[:, 1] / np.sqrt(d_safe)
     order = np.argsort(f, kind="stable")
