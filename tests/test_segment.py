@@ -269,6 +269,81 @@ def test_rounding_is_threshold_dynamics_of_the_heat_kernel(t):
     assert np.array_equal(_round_charts(nbr, P, labels, diffusion_time=t), ref)
 
 
+def _band_reference(nbr, labels, n_labels, rings):
+    """The rounding band as it was computed before it was compiled: rings of sorted keys grown
+    with np.unique / np.isin, each pair's neighbours looked up by searchsorted."""
+    nb_lab = np.where(nbr >= 0, labels[np.maximum(nbr, 0)], -1)
+    cross = (nb_lab >= 0) & (nb_lab != labels[:, None])
+    f0 = np.flatnonzero(cross.any(axis=1))
+    fc, sc = np.nonzero(cross)
+    ring = np.unique(np.r_[fc * n_labels + nb_lab[fc, sc], f0 * n_labels + labels[f0]])
+    prev, out = ring[:0], [ring]
+    for _ in range(rings):
+        f, k = np.divmod(ring, n_labels)
+        g = nbr[f]
+        keys = np.unique((g * n_labels + k[:, None])[g >= 0])
+        keys = keys[~np.isin(keys, ring) & ~np.isin(keys, prev)]
+        if len(keys) == 0:
+            break
+        prev, ring = ring, keys
+        out.append(ring)
+    keys = np.sort(np.concatenate(out))
+    f, k = np.divmod(keys, n_labels)
+    g = nbr[f]
+    gk = g * n_labels + k[:, None]
+    j = np.minimum(np.searchsorted(keys, gk), len(keys) - 1)
+    return keys, np.where((g >= 0) & (keys[j] == gk), j, -1)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_band_and_its_diffusion_are_the_sparse_computation(seed):
+    import scipy.sparse as sp
+
+    from segparam.segment import _band, _heat_band, _heat_coefficients, _neighbor_table
+
+    # Graphs with unused slots (a grid's border, the edges inside a CAD plate's feature
+    # regions), noisy labels of few and many charts, bands of 0 to 9 rings.
+    rng = np.random.default_rng(seed)
+    V, F = tri_grid(30, 20) if seed != 1 else plate_with_holes()
+    W = face_affinity(V, F)
+    if seed == 1:
+        normals = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        C = W.tocoo()
+        keep = (normals[C.row] * normals[C.col]).sum(axis=1) > 0.5
+        W = sp.csr_matrix((C.data[keep], (C.row[keep], C.col[keep])), shape=W.shape)
+    nbr, P = _neighbor_table(W)
+    C = V[F].mean(axis=1)
+    for n_labels in (2, 7, 40):
+        labels = rng.integers(0, n_labels, 8)[
+            np.argmin(((C[:, None, :2] - rng.random((1, 8, 2)) * C[:, :2].max(0)) ** 2).sum(2), 1)
+        ]
+        noisy = rng.random(len(F)) < 0.05
+        labels[noisy] = rng.integers(0, n_labels, noisy.sum())
+        for rings in (0, 3, 9):
+            keys, col = _band(nbr, labels, n_labels, rings)
+            ref_keys, ref_col = _band_reference(nbr, labels, n_labels, rings)
+            assert np.array_equal(keys, ref_keys) and np.array_equal(col, ref_col)
+        # The diffusion: the same float32 bits as the sparse products it replaces.
+        f, k = np.divmod(keys, n_labels)
+        Pf = P[f].astype(np.float32)
+        held = (Pf * (rng.random(Pf.shape) < 0.5)).sum(axis=1)
+        start = (labels[f] == k).astype(np.float32)
+        coef = _heat_coefficients(32.0).astype(np.float32)
+        found = col >= 0
+        rows = np.broadcast_to(np.arange(len(keys))[:, None], col.shape)[found]
+        A = sp.csr_matrix((Pf[found], (rows, col[found])), shape=(len(keys), len(keys)))
+        t_prev, t_cur = start, -(A @ start + held)
+        a_prev, a_cur = 1.0, -1.0
+        value = coef[0] * t_prev + coef[1] * t_cur
+        for ck in coef[2:]:
+            t_next = -2.0 * (A @ t_cur + a_cur * held) - t_prev
+            t_prev, t_cur, a_prev, a_cur = t_cur, t_next, a_cur, -2.0 * a_cur - a_prev
+            value += ck * t_cur
+        out = _heat_band(col, Pf, start, held, coef)
+        assert out.dtype == np.float32 and np.array_equal(out.view(np.int32), value.view(np.int32))
+
+
 def test_rounding_straightens_a_jagged_border():
     from segparam.segment import _round_charts, _smooth_boundaries
 
