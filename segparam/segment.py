@@ -409,12 +409,14 @@ def _proxy_cells(W: sp.csr_matrix, n_cells: int, seed: int) -> np.ndarray:
     D = W.copy()
     D.data = 1.0 / np.maximum(D.data, 1e-12)  # strong affinity = short distance
     _, _, source = dijkstra(D, indices=seeds, min_only=True, return_predecessors=True)
-    cell = np.searchsorted(seeds, source)
+    rank = np.zeros(m, dtype=np.int64)  # the cell of every seed: its rank among the seeds
+    rank[seeds] = np.arange(len(seeds))
+    cell = rank[np.maximum(source, 0)]
     unreached = source < 0  # another component without a seed: its own cells
     if unreached.any():
         _, comp = _cc(W[unreached][:, unreached], directed=False)
         cell[unreached] = len(seeds) + comp
-    return np.unique(cell, return_inverse=True)[1].ravel()
+    return _compact(cell)
 
 
 def _spectral_embedding(W: sp.csr_matrix, k: int, seed: int) -> np.ndarray:
@@ -856,14 +858,34 @@ def feature_regions(
     G = sp.coo_matrix((np.ones(smooth.sum()), (C.row[smooth], C.col[smooth])), shape=W.shape)
     _, regions = _cc(G.tocsr(), directed=False)
     regions = _merge_small(regions.astype(np.int64), W, min_faces)
-    return np.unique(regions, return_inverse=True)[1].ravel().astype(np.int64)
+    return _compact(regions)
 
 
 def _within(W: sp.csr_matrix, labels: np.ndarray) -> sp.csr_matrix:
-    """``W`` without the entries that join two different labels."""
-    C = W.tocoo()
-    same = labels[C.row] == labels[C.col]
-    return sp.csr_matrix((C.data[same], (C.row[same], C.col[same])), shape=W.shape)
+    """``W`` without the entries that join two different labels.
+
+    Read off ``W``'s arrays (rows in order, each row's columns ascending): the matrix that
+    rebuilding it from the kept entries gives, without the rebuild's sort (20k faces 2.4 ->
+    0.5 ms).
+    """
+    if not W.has_canonical_format:  # duplicates or unsorted columns: rebuild (sum and sort)
+        C = W.tocoo()
+        same = labels[C.row] == labels[C.col]
+        return sp.csr_matrix((C.data[same], (C.row[same], C.col[same])), shape=W.shape)
+    m = W.shape[0]
+    rows = np.repeat(np.arange(m), np.diff(W.indptr))
+    same = labels[rows] == labels[W.indices]
+    indptr = np.zeros(m + 1, dtype=np.int64)
+    np.cumsum(np.bincount(rows[same], minlength=m), out=indptr[1:])
+    return sp.csr_matrix((W.data[same], W.indices[same], indptr), shape=W.shape)
+
+
+def _compact(labels: np.ndarray) -> np.ndarray:
+    """``np.unique(labels, return_inverse=True)[1]`` of non-negative integer labels, as int64:
+    every label replaced by its rank among the labels in use, by a count instead of a sort
+    (20k faces: 1.3 -> 0.1 ms; five of these per segmentation)."""
+    used = np.bincount(labels) > 0
+    return (np.cumsum(used) - 1)[labels].astype(np.int64, copy=False)
 
 
 def _relabel_components(labels: np.ndarray, W: sp.csr_matrix) -> np.ndarray:
@@ -872,7 +894,7 @@ def _relabel_components(labels: np.ndarray, W: sp.csr_matrix) -> np.ndarray:
     ``W``'s pattern is the face adjacency (every affinity is positive).
     """
     _, comp = _cc(_within(W, labels), directed=False)
-    return np.unique(comp, return_inverse=True)[1].ravel().astype(np.int64)
+    return _compact(comp)
 
 
 def _merge_small(labels: np.ndarray, W: sp.csr_matrix, min_faces: int) -> np.ndarray:
@@ -904,7 +926,7 @@ def _merge_small(labels: np.ndarray, W: sp.csr_matrix, min_faces: int) -> np.nda
         # Resolve chains a -> b -> c.
         for _ in range(int(np.ceil(np.log2(max(n, 2)))) + 1):
             mapping = mapping[mapping]
-        labels = np.unique(mapping[labels], return_inverse=True)[1].ravel()
+        labels = _compact(mapping[labels])
     return labels.astype(np.int64)
 
 
@@ -1033,7 +1055,7 @@ def _make_disks(
             queue.append(next_label)
             next_label += 1
         queue.append(c)
-    return np.unique(labels, return_inverse=True)[1].ravel().astype(np.int64)
+    return _compact(labels)
 
 
 def _cluster_components(
@@ -1160,7 +1182,7 @@ def segment(
     limit = one_blas_thread() if len(big) else nullcontext()
     with limit:
         labels = _cluster_components(W, comp, big, share, labels, n_comp, cfg, seed)
-    labels = np.unique(labels, return_inverse=True)[1].ravel().astype(np.int64)
+    labels = _compact(labels)
     nbr, P = _neighbor_table(W_in)
     labels = _smooth_boundaries(nbr, labels, cfg.smoothing)
     min_faces = max(2, int(0.1 * m / max(target, n_comp)))

@@ -237,6 +237,31 @@ def test_majority_filter_reaches_a_fixed_point(seed):
     assert _cut_edges(F, out) < 0.5 * _cut_edges(F, labels)
 
 
+def test_compact_and_within_are_their_sort_forms():
+    import scipy.sparse as sp
+
+    from segparam.segment import _compact
+
+    rng = np.random.default_rng(0)
+    for n in (1, 7, 1000):
+        labels = rng.integers(0, n, 3000) * 3 + 1  # gaps: labels not in use
+        assert np.array_equal(_compact(labels), np.unique(labels, return_inverse=True)[1])
+    V, F = tri_grid(20, 20)
+    W = face_affinity(V, F)
+    labels = rng.integers(0, 4, len(F))
+    C = W.tocoo()
+    same = labels[C.row] == labels[C.col]
+    ref = sp.csr_matrix((C.data[same], (C.row[same], C.col[same])), shape=W.shape)
+    rows = np.repeat(np.arange(len(F)), np.diff(W.indptr))
+    flip = np.lexsort((-W.indices, rows))  # each row's columns descending: not canonical
+    unsorted = sp.csr_matrix((W.data[flip], W.indices[flip], W.indptr), shape=W.shape)
+    assert not unsorted.has_canonical_format
+    for M in (W, unsorted):
+        out = _within(M, labels)
+        for a in ("data", "indices", "indptr"):
+            assert np.array_equal(getattr(out, a), getattr(ref, a))
+
+
 def test_heat_coefficients_expand_the_exponential():
     from segparam.segment import _heat_coefficients
 
