@@ -237,6 +237,49 @@ def test_majority_filter_reaches_a_fixed_point(seed):
     assert _cut_edges(F, out) < 0.5 * _cut_edges(F, labels)
 
 
+def _majority_reference(nbr, labels, passes):
+    """The majority filter as arrays, as it was before it was compiled."""
+    L = np.where(nbr >= 0, labels[np.maximum(nbr, 0)], -1)
+    below = (nbr >= 0) & (nbr < np.arange(len(labels))[:, None])
+    for _ in range(passes):
+        own, new = labels, labels.copy()
+        for a, b in ((0, 1), (0, 2), (1, 2)):
+            if b < nbr.shape[1]:
+                agree = (L[:, a] == L[:, b]) & (L[:, a] >= 0) & (L[:, a] != own)
+                new = np.where(agree & (new == own), L[:, a], new)
+        moved = new != own
+        swap = (below & (L == new[:, None]) & (new[np.maximum(nbr, 0)] == own[:, None])).any(1)
+        new[swap & moved] = own[swap & moved]
+        if np.array_equal(new, labels):
+            break
+        labels = new
+        L = np.where(nbr >= 0, labels[np.maximum(nbr, 0)], -1)
+    return labels
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_majority_filter_is_the_array_form(seed):
+    from segparam.segment import _smooth_boundaries
+
+    # A grid with noisy labels of 2 to 9 charts, and random graphs with 2 to 5 slots (the vote
+    # reads the first three; the trading rule all of them).
+    rng = np.random.default_rng(seed)
+    V, F, nbr, _ = _grid_graph(30)
+    C = V[F].mean(axis=1)
+    for n_labels in (2, 9):
+        labels = (C[:, 0] * n_labels + 0.3 * rng.random(len(F))).astype(np.int64) % n_labels
+        for passes in (1, 4, 50):
+            out = _smooth_boundaries(nbr, labels, passes)
+            assert np.array_equal(out, _majority_reference(nbr, labels, passes))
+    for width in (2, 3, 5):
+        m = 500
+        nbr = rng.integers(-1, m, (m, width))
+        labels = rng.integers(0, 4, m)
+        assert np.array_equal(
+            _smooth_boundaries(nbr, labels, 6), _majority_reference(nbr, labels, 6)
+        )
+
+
 def test_compact_and_within_are_their_sort_forms():
     import scipy.sparse as sp
 
