@@ -58,7 +58,6 @@ from .mesh import (
     disk_labels,
     edges,
     face_adjacency,
-    face_areas,
     face_normals,
     is_disk,
     is_edge_manifold,
@@ -249,12 +248,19 @@ def face_affinity(
     if len(pairs) == 0:
         return sp.csr_matrix((m, m))
     N = face_normals(V, F) if normals is None else normals
-    C = V[F].mean(axis=1)
     i, j = pairs[:, 0], pairs[:, 1]
-    cos = np.clip((N[i] * N[j]).sum(axis=1), -1.0, 1.0)
-    concave = ((C[j] - C[i]) * N[i]).sum(axis=1) > 0
+    # Coordinate by coordinate, (3, k) arrays gathered per coordinate: the same bits as the
+    # centroids V[F].mean(axis=1) and the row sums of (k, 3) products (from 0.0, as in
+    # segparam.mesh.corner_angles), 0.72 -> 0.36 s of CPU at 1M faces.
+    Vt, Ft, Nt = np.ascontiguousarray(V.T), np.ascontiguousarray(F.T), np.ascontiguousarray(N.T)
+    Ct = (Vt[:, Ft[0]] + Vt[:, Ft[1]] + Vt[:, Ft[2]]) / 3
+    Ni, Nj, Cd = Nt[:, i], Nt[:, j], Ct[:, j] - Ct[:, i]
+    cos = np.clip(0.0 + Ni[0] * Nj[0] + Ni[1] * Nj[1] + Ni[2] * Nj[2], -1.0, 1.0)
+    concave = 0.0 + Cd[0] * Ni[0] + Cd[1] * Ni[1] + Cd[2] * Ni[2] > 0
     d = np.where(concave, concave_weight, convex_weight) * (1.0 - cos)
-    length = np.linalg.norm(V[E[edge, 0]] - V[E[edge, 1]], axis=1)
+    Et = np.ascontiguousarray(E[edge].T)
+    Ed = Vt[:, Et[0]] - Vt[:, Et[1]]
+    length = np.sqrt(0.0 + Ed[0] * Ed[0] + Ed[1] * Ed[1] + Ed[2] * Ed[2])
     # The floor keeps a few faces between two sharp creases from becoming an island that the
     # normalized cut would rather cut off than make a real chart boundary.
     w = (length / length.mean()) * np.maximum(np.exp(-d / max(d.mean(), 1e-12)), AFFINITY_FLOOR)
@@ -1157,7 +1163,8 @@ def segment(
         target = int(np.ceil(curvature / cfg.curvature_per_chart))
         target = max(target, int(np.ceil(m / cfg.max_chart_faces)), 1)
     target = min(target, cfg.max_charts, m)
-    N = face_normals(V, F)  # shared by the affinity, the feature regions and the planar test
+    # shared by the affinity, the feature regions and the planar test; the areas by the shares
+    N, area = face_normals(V, F, return_areas=True)
     W = face_affinity(
         V,
         F,
@@ -1172,7 +1179,6 @@ def segment(
     # and join a neighbour; the wall of a drilled hole in a CAD mesh has 30 or more.
     comp = feature_regions(V, F, W, cfg.feature_angle, min(16, max(2, int(0.002 * m))), N)
     n_comp = int(comp.max()) + 1
-    area = face_areas(V, F)
     comp_area = np.bincount(comp, weights=area, minlength=n_comp)
     # Charts per component, proportional to area (every component gets at least one).
     share = np.maximum(1, np.round(target * comp_area / comp_area.sum())).astype(int)

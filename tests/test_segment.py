@@ -4,7 +4,7 @@ import trimesh
 from meshes import plate_with_holes, tri_grid
 
 from segparam.errors import ConfigError
-from segparam.mesh import connected_components, is_disk
+from segparam.mesh import connected_components, edges, is_disk
 from segparam.segment import SegmentConfig, _within, face_affinity, fiedler_bisect, segment
 
 
@@ -151,6 +151,35 @@ def test_affinity_and_bisection():
     # A long strip is cut across its length: the halves are the left and right ends.
     x = V[F].mean(1)[:, 0]
     assert abs(x[side].mean() - x[~side].mean()) > 0.4
+
+
+def test_affinity_is_its_row_sum_form():
+    import scipy.sparse as sp
+
+    from segparam.mesh import face_adjacency, face_normals
+
+    # The affinity as it was written with (k, 3) rows: the same bits, on a noisy sphere (both
+    # signs of every dot product), a CAD plate and a grid with a flat fold (zero dot products).
+    rng = np.random.default_rng(0)
+    V0, F0 = icosphere()
+    V1, F1 = tri_grid(10, 10)
+    V1 = np.c_[V1[:, :2], np.where(V1[:, 0] > 0.5, V1[:, 0] - 0.5, 0.0)]
+    for V, F in [(V0 + 0.05 * rng.normal(size=V0.shape), F0), plate_with_holes(), (V1, F1)]:
+        W = face_affinity(V, F, concave_weight=1.3, convex_weight=0.3)
+        N = face_normals(V, F)
+        C = V[F].mean(axis=1)
+        pairs, edge = face_adjacency(F)
+        E = edges(F)[0]
+        i, j = pairs[:, 0], pairs[:, 1]
+        cos = np.clip((N[i] * N[j]).sum(axis=1), -1.0, 1.0)
+        concave = ((C[j] - C[i]) * N[i]).sum(axis=1) > 0
+        d = np.where(concave, 1.3, 0.3) * (1.0 - cos)
+        length = np.linalg.norm(V[E[edge, 0]] - V[E[edge, 1]], axis=1)
+        w = (length / length.mean()) * np.maximum(np.exp(-d / max(d.mean(), 1e-12)), 0.05)
+        m = len(F)
+        ref = sp.coo_matrix((np.r_[w, w], (np.r_[i, j], np.r_[j, i])), shape=(m, m)).tocsr()
+        for a in ("data", "indices", "indptr"):
+            assert np.array_equal(getattr(W, a), getattr(ref, a))
 
 
 def test_config_errors():
