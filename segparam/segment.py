@@ -875,18 +875,28 @@ def feature_regions(
     sharp edges that do not close a curve (noise on a scan, a crease that fades out) separate
     nothing; regions smaller than ``min_faces`` (a face or two fenced in by noise) join the
     neighbour they share most affinity with. On a smooth surface this is the affinity graph's
-    components. ``normals`` is ``face_normals(V, F)``, if the caller has it.
+    components. ``W`` is the (symmetric) face affinity; ``normals`` is ``face_normals(V, F)``,
+    if the caller has it.
 
     Returns
     -------
     (m,) int64 ndarray
         Region of every face, ``0 .. r - 1``.
     """
-    C = W.tocoo()
     N = face_normals(V, F) if normals is None else normals
-    smooth = (N[C.row] * N[C.col]).sum(axis=1) >= np.cos(np.radians(feature_angle))
-    G = sp.coo_matrix((np.ones(smooth.sum()), (C.row[smooth], C.col[smooth])), shape=W.shape)
-    _, regions = _cc(G.tocsr(), directed=False)
+    # Every edge once (W's upper triangle: the components, numbered by their first face, are
+    # those of both directions), its normals' dot product coordinate by coordinate (the same
+    # bits as the row sum of (k, 3) products): 0.42 -> 0.12 s of CPU at 1M faces.
+    m = W.shape[0]
+    rows = np.repeat(np.arange(m), np.diff(W.indptr))
+    upper = rows < W.indices
+    i, j = rows[upper], W.indices[upper]
+    Nt = np.ascontiguousarray(N.T)
+    Ni, Nj = Nt[:, i], Nt[:, j]
+    dot = 0.0 + Ni[0] * Nj[0] + Ni[1] * Nj[1] + Ni[2] * Nj[2]
+    smooth = dot >= np.cos(np.radians(feature_angle))
+    G = sp.csr_matrix((np.ones(smooth.sum()), (i[smooth], j[smooth])), shape=W.shape)
+    _, regions = _cc(G, directed=False)
     regions = _merge_small(regions.astype(np.int64), W, min_faces)
     return _compact(regions)
 

@@ -182,6 +182,33 @@ def test_affinity_is_its_row_sum_form():
             assert np.array_equal(getattr(W, a), getattr(ref, a))
 
 
+def test_feature_regions_are_their_row_sum_form():
+    import scipy.sparse as sp
+
+    from segparam.mesh import face_normals
+    from segparam.segment import _merge_small, feature_regions
+
+    # As written before with both directions of every edge and (k, 3) row sums.
+    rng = np.random.default_rng(1)
+    V0, F0 = icosphere()
+    for V, F in [(V0 + 0.08 * rng.normal(size=V0.shape), F0), plate_with_holes()]:
+        W = face_affinity(V, F)
+        N = face_normals(V, F)
+        for angle, min_faces in ((20.0, 1), (45.0, 4), (60.0, 16), (180.0, 2)):
+            C = W.tocoo()
+            smooth = (N[C.row] * N[C.col]).sum(axis=1) >= np.cos(np.radians(angle))
+            G = sp.coo_matrix((np.ones(smooth.sum()), (C.row[smooth], C.col[smooth])), W.shape)
+            ref = _merge_small(_graph_components(G), W, min_faces)
+            ref = np.unique(ref, return_inverse=True)[1]
+            assert np.array_equal(feature_regions(V, F, W, angle, min_faces, N), ref)
+
+
+def _graph_components(G):
+    from scipy.sparse.csgraph import connected_components as cc
+
+    return cc(G.tocsr(), directed=False)[1].astype(np.int64)
+
+
 def test_config_errors():
     with pytest.raises(ConfigError, match="n_charts is 0"):
         SegmentConfig(n_charts=0)
