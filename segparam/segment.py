@@ -698,18 +698,22 @@ def _chart_band(nbr, seeds, k, rings, mark, where, face, chart, link, n):  # pra
 
 
 @njit(cache=True, nogil=True)
-def _heat_band(col, weight, start, held, coef):  # pragma: no cover - compiled
-    """:func:`_round_charts`' diffusion of the band: ``sum_d coef[d] T_d(x) start`` by the
-    Chebyshev recurrence ``T_d+1 = 2 x T_d - T_d-1`` for ``x (v, a) = (-(A v + a held), -a)``,
-    ``A`` the band's transition probabilities (``weight[i, s]`` to pair ``col[i, s]``, none
-    where it is -1) and ``a`` the value held outside the band (1, then -1, 1, ...).
+def _heat_band(keys, col, nbr, P, labels, n_labels, coef):  # pragma: no cover - compiled
+    """:func:`_round_charts`' diffusion of the band of :func:`_band` (``keys``, ``col``): every
+    chart's indicator, ``sum_d coef[d] T_d(x) start``, by the Chebyshev recurrence
+    ``T_d+1 = 2 x T_d - T_d-1`` for ``x (v, a) = (-(A v + a held), -a)`` on the state (band
+    values, held value ``a``: 1, then -1, 1, ...). ``A`` is the band's part of the transition
+    probabilities ``P`` (as float32), ``held`` each pair's probability of stepping out of the
+    band into its chart (neighbours outside the band lie deep inside the chart, indicator 1, or
+    outside, 0), ``start`` the indicator itself.
 
-    In float32, operation for operation as with the sparse matrix ``A`` (each row summed from
-    0 in increasing column, which is slot order for ``nbr`` rows ascending, as
-    :func:`_neighbor_table` gives), so the same bits, in one pass per term instead of a sparse
-    product and five array operations (the sample brain 0.027 -> 0.012 s, 42 terms of 98k
-    pairs). Rows are summed slot by slot over all pairs (the long loop inside), absent slots
-    as a zero weight on an extra zero entry, which leaves every sum as it is.
+    In float32, operation for operation as with a sparse matrix ``A`` and row sums of ``(n, w)``
+    arrays (each row summed from 0 in increasing column, which is slot order for ``nbr`` rows
+    ascending, as :func:`_neighbor_table` gives), so the same bits, in one pass per term
+    instead of a sparse product and five array operations (0.027 -> 0.012 s on the sample
+    brain's 98k pairs, 42 terms), and the set-up (``held``, ``start``) in one pass instead of
+    six gathers. Rows are summed slot by slot over all pairs (the long loop inside), absent
+    slots as a zero weight on an extra zero entry, which leaves every sum as it is.
 
     Returns
     -------
@@ -718,13 +722,20 @@ def _heat_band(col, weight, start, held, coef):  # pragma: no cover - compiled
     n, width = col.shape
     index = np.empty((width, n), dtype=np.int64)
     wt = np.empty((width, n), dtype=np.float32)
-    for i in range(n):
-        for s in range(width):
-            index[s, i] = col[i, s] if col[i, s] >= 0 else n
-            wt[s, i] = weight[i, s] if col[i, s] >= 0 else 0.0
+    held = np.empty(n, dtype=np.float32)
     two = np.float32(2.0)
     t_prev = np.zeros(n + 1, dtype=np.float32)  # entry n: the absent slots' zero
-    t_prev[:n] = start
+    for i in range(n):
+        f, k = keys[i] // n_labels, keys[i] % n_labels
+        t_prev[i] = 1.0 if labels[f] == k else 0.0
+        h = np.float32(0.0)
+        for s in range(width):
+            p = np.float32(P[f, s])
+            g = nbr[f, s]
+            index[s, i] = col[i, s] if col[i, s] >= 0 else n
+            wt[s, i] = p if col[i, s] >= 0 else 0.0
+            h += p if g >= 0 and col[i, s] < 0 and labels[g] == k else np.float32(0.0)
+        held[i] = h
     t_cur = np.zeros(n + 1, dtype=np.float32)
     t_next = np.zeros(n + 1, dtype=np.float32)
     value = np.empty(n, dtype=np.float32)
@@ -741,6 +752,28 @@ def _heat_band(col, weight, start, held, coef):  # pragma: no cover - compiled
         t_prev, t_cur, t_next = t_cur, t_next, t_prev
         a_prev, a_cur = a_cur, -two * a_cur - a_prev
     return value
+
+
+@njit(cache=True, nogil=True)
+def _vote(keys, value, labels, n_labels):  # pragma: no cover - compiled
+    """:func:`_round_charts`' vote: every face of the band joins the chart of its largest
+    value, its own chart first by a bonus of 1e-6 (added in float64, rounded to float32, as
+    ``value += 1e-6 * own``), then the lowest chart (the first of the face's pairs, which
+    ``keys`` lists by face, then chart)."""
+    new = labels.copy()
+    i, n = 0, len(keys)
+    while i < n:
+        f = keys[i] // n_labels
+        best, win = np.float32(-np.inf), i
+        while i < n and keys[i] // n_labels == f:
+            v = value[i]
+            if keys[i] % n_labels == labels[f]:
+                v = np.float32(np.float64(v) + 1e-6)
+            if v > best:
+                best, win = v, i
+            i += 1
+        new[f] = keys[win] % n_labels
+    return new
 
 
 @njit(cache=True, nogil=True)
@@ -831,25 +864,8 @@ def _round_charts(
         keys, col = _band(nbr, labels, n_labels, rings)
         if len(keys) == 0:
             break
-        f, k = np.divmod(keys, n_labels)
-        g = nbr[f]
-        Pf = P[f].astype(np.float32)
-        # Neighbours outside the band lie deep inside the chart (indicator 1) or outside (0).
-        inside = (g >= 0) & (col < 0) & (labels[np.maximum(g, 0)] == k[:, None])
-        c = (Pf * inside).sum(axis=1)
-        value = _heat_band(col, Pf, (labels[f] == k).astype(np.float32), c, coef)
-        # Vote: the largest value per face; ties keep the current chart, then the lowest chart.
-        # The keys are sorted by face, so a face's pairs are one run: its winner is the run's
-        # first pair at the run's largest value (a sort of all pairs took 18 of the 84 ms here
-        # on the sample brain).
-        value += 1e-6 * (labels[f] == k)
-        new_face = np.r_[True, f[1:] != f[:-1]]
-        run = np.cumsum(new_face) - 1
-        best = np.maximum.reduceat(value, np.flatnonzero(new_face))
-        cand = np.flatnonzero(value == best[run])
-        win = cand[np.r_[True, run[cand][1:] != run[cand][:-1]]]
-        new = labels.copy()
-        new[f[win]] = k[win]
+        value = _heat_band(keys, col, nbr, P, labels, n_labels, coef)
+        new = _vote(keys, value, labels, n_labels)
         old_size = np.bincount(labels, minlength=n_labels)
         new_size = np.bincount(new, minlength=n_labels)
         shrunk = (new_size < np.maximum(min_faces, old_size // 2))[labels]

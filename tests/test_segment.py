@@ -423,7 +423,7 @@ def _band_reference(nbr, labels, n_labels, rings):
 def test_band_and_its_diffusion_are_the_sparse_computation(seed):
     import scipy.sparse as sp
 
-    from segparam.segment import _band, _heat_band, _heat_coefficients, _neighbor_table
+    from segparam.segment import _band, _heat_band, _heat_coefficients, _neighbor_table, _vote
 
     # Graphs with unused slots (a grid's border, the edges inside a CAD plate's feature
     # regions), noisy labels of few and many charts, bands of 0 to 9 rings.
@@ -448,10 +448,13 @@ def test_band_and_its_diffusion_are_the_sparse_computation(seed):
             keys, col = _band(nbr, labels, n_labels, rings)
             ref_keys, ref_col = _band_reference(nbr, labels, n_labels, rings)
             assert np.array_equal(keys, ref_keys) and np.array_equal(col, ref_col)
-        # The diffusion: the same float32 bits as the sparse products it replaces.
+        # The diffusion and the vote: the same float32 bits and labels as the sparse products
+        # and array operations they replace.
         f, k = np.divmod(keys, n_labels)
+        g = nbr[f]
         Pf = P[f].astype(np.float32)
-        held = (Pf * (rng.random(Pf.shape) < 0.5)).sum(axis=1)
+        inside = (g >= 0) & (col < 0) & (labels[np.maximum(g, 0)] == k[:, None])
+        held = (Pf * inside).sum(axis=1)
         start = (labels[f] == k).astype(np.float32)
         coef = _heat_coefficients(32.0).astype(np.float32)
         found = col >= 0
@@ -464,8 +467,25 @@ def test_band_and_its_diffusion_are_the_sparse_computation(seed):
             t_next = -2.0 * (A @ t_cur + a_cur * held) - t_prev
             t_prev, t_cur, a_prev, a_cur = t_cur, t_next, a_cur, -2.0 * a_cur - a_prev
             value += ck * t_cur
-        out = _heat_band(col, Pf, start, held, coef)
+        out = _heat_band(keys, col, nbr, P, labels, n_labels, coef)
         assert out.dtype == np.float32 and np.array_equal(out.view(np.int32), value.view(np.int32))
+        value += 1e-6 * (labels[f] == k)
+        new_face = np.r_[True, f[1:] != f[:-1]]
+        run = np.cumsum(new_face) - 1
+        best = np.maximum.reduceat(value, np.flatnonzero(new_face))
+        cand = np.flatnonzero(value == best[run])
+        win = cand[np.r_[True, run[cand][1:] != run[cand][:-1]]]
+        ref = labels.copy()
+        ref[f[win]] = k[win]
+        assert np.array_equal(_vote(keys, out, labels, n_labels), ref)
+        # ties: equal values go to the face's own chart, then to its lowest
+        tied = _vote(keys, np.zeros(len(keys), np.float32), labels, n_labels)
+        own = np.zeros(len(F), dtype=bool)
+        own[f[labels[f] == k]] = True
+        faces, at = np.unique(f, return_index=True)
+        first = np.full(len(F), -1)
+        first[faces] = k[at]  # a face's lowest chart in the band
+        assert np.array_equal(tied, np.where(own, labels, np.where(first >= 0, first, labels)))
 
 
 def test_rounding_straightens_a_jagged_border():
