@@ -900,20 +900,15 @@ def feature_regions(
         Region of every face, ``0 .. r - 1``.
     """
     N = face_normals(V, F) if normals is None else normals
-    # Every edge once (W's upper triangle: the components, numbered by their first face, are
-    # those of both directions), its normals' dot product coordinate by coordinate (the same
-    # bits as the row sum of (k, 3) products): 0.42 -> 0.12 s of CPU at 1M faces.
-    m = W.shape[0]
-    rows = np.repeat(np.arange(m), np.diff(W.indptr))
-    upper = rows < W.indices
-    i, j = rows[upper], W.indices[upper]
+    # Every edge once, its normals' dot product coordinate by coordinate (the same bits as the
+    # row sum of (k, 3) products): 0.42 -> 0.12 s of CPU at 1M faces.
+    i, j = _edge_pairs(W)
     Nt = np.ascontiguousarray(N.T)
     Ni, Nj = Nt[:, i], Nt[:, j]
     dot = 0.0 + Ni[0] * Nj[0] + Ni[1] * Nj[1] + Ni[2] * Nj[2]
     smooth = dot >= np.cos(np.radians(feature_angle))
-    G = sp.csr_matrix((np.ones(smooth.sum()), (i[smooth], j[smooth])), shape=W.shape)
-    _, regions = _cc(G, directed=False)
-    regions = _merge_small(regions.astype(np.int64), W, min_faces)
+    regions = _components(i[smooth], j[smooth], W.shape[0])
+    regions = _merge_small(regions, W, min_faces)
     return _compact(regions)
 
 
@@ -949,8 +944,29 @@ def _relabel_components(labels: np.ndarray, W: sp.csr_matrix) -> np.ndarray:
 
     ``W``'s pattern is the face adjacency (every affinity is positive).
     """
-    _, comp = _cc(_within(W, labels), directed=False)
-    return _compact(comp)
+    i, j = _edge_pairs(W)
+    same = labels[i] == labels[j]
+    return _components(i[same], j[same], W.shape[0])
+
+
+def _edge_pairs(W: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
+    """Every edge of a symmetric graph once: the entries ``(i, j)`` of ``W`` above the
+    diagonal, row by row."""
+    rows = np.repeat(np.arange(W.shape[0]), np.diff(W.indptr))
+    upper = rows < W.indices
+    return rows[upper], W.indices[upper]
+
+
+def _components(i: np.ndarray, j: np.ndarray, m: int) -> np.ndarray:
+    """Connected components of the graph on ``m`` nodes with the edges ``(i, j)``, ``i``
+    ascending (as :func:`_edge_pairs` gives them), numbered in the order of their first node
+    (as ``connected_components`` numbers them, whichever direction an edge is given in). Half
+    the edges of a symmetric matrix, put in a CSR matrix as they are (no sort): components of
+    the 1M-face brain's charts 0.17 -> 0.15 s, the sample brain's 1.9 -> 1.5 ms."""
+    indptr = np.zeros(m + 1, dtype=np.int64)
+    np.cumsum(np.bincount(i, minlength=m), out=indptr[1:])
+    G = sp.csr_matrix((np.ones(len(i)), j, indptr), shape=(m, m))
+    return _cc(G, directed=False)[1].astype(np.int64)
 
 
 def _merge_small(labels: np.ndarray, W: sp.csr_matrix, min_faces: int) -> np.ndarray:

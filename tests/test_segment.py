@@ -209,6 +209,30 @@ def _graph_components(G):
     return cc(G.tocsr(), directed=False)[1].astype(np.int64)
 
 
+def test_components_number_like_connected_components():
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components as cc
+
+    from segparam.segment import _components, _edge_pairs, _relabel_components
+
+    # Half the edges, in CSR order, give the components of the whole symmetric graph, numbered
+    # alike; so do the charts' pieces.
+    rng = np.random.default_rng(0)
+    V, F = tri_grid(20, 20)
+    W = face_affinity(V, F)
+    i, j = _edge_pairs(W)
+    assert len(i) == W.nnz // 2 and (i < j).all()
+    for p in (0.3, 0.5, 0.7):
+        keep = rng.random(len(i)) < p
+        half = _components(i[keep], j[keep], len(F))
+        sym = np.r_[i[keep], j[keep]], np.r_[j[keep], i[keep]]
+        G = sp.csr_matrix((np.ones(2 * keep.sum()), sym), shape=W.shape)
+        assert np.array_equal(half, cc(G, directed=False)[1])
+    labels = rng.integers(0, 5, len(F))
+    ref = cc(_within(W, labels), directed=False)[1]
+    assert np.array_equal(_relabel_components(labels, W), ref)
+
+
 def test_config_errors():
     with pytest.raises(ConfigError, match="n_charts is 0"):
         SegmentConfig(n_charts=0)
