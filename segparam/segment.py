@@ -249,24 +249,54 @@ def face_affinity(
         return sp.csr_matrix((m, m))
     N = face_normals(V, F) if normals is None else normals
     i, j = pairs[:, 0], pairs[:, 1]
-    # Coordinate by coordinate, (3, k) arrays gathered per coordinate: the same bits as the
-    # centroids V[F].mean(axis=1) and the row sums of (k, 3) products (from 0.0, as in
-    # segparam.mesh.corner_angles), 0.72 -> 0.36 s of CPU at 1M faces.
-    Vt, Ft, Nt = np.ascontiguousarray(V.T), np.ascontiguousarray(F.T), np.ascontiguousarray(N.T)
-    Ct = (Vt[:, Ft[0]] + Vt[:, Ft[1]] + Vt[:, Ft[2]]) / 3
-    Ni, Nj, Cd = Nt[:, i], Nt[:, j], Ct[:, j] - Ct[:, i]
-    cos = np.clip(0.0 + Ni[0] * Nj[0] + Ni[1] * Nj[1] + Ni[2] * Nj[2], -1.0, 1.0)
-    concave = 0.0 + Cd[0] * Ni[0] + Cd[1] * Ni[1] + Cd[2] * Ni[2] > 0
-    d = np.where(concave, concave_weight, convex_weight) * (1.0 - cos)
-    Et = np.ascontiguousarray(E[edge].T)
-    Ed = Vt[:, Et[0]] - Vt[:, Et[1]]
-    length = np.sqrt(0.0 + Ed[0] * Ed[0] + Ed[1] * Ed[1] + Ed[2] * Ed[2])
+    d, length = _affinity_terms(
+        np.ascontiguousarray(V, dtype=np.float64),
+        np.ascontiguousarray(F, dtype=np.int64),
+        np.ascontiguousarray(N, dtype=np.float64),
+        np.ascontiguousarray(i),
+        np.ascontiguousarray(j),
+        E[edge, 0],
+        E[edge, 1],
+        float(concave_weight),
+        float(convex_weight),
+    )
     # The floor keeps a few faces between two sharp creases from becoming an island that the
     # normalized cut would rather cut off than make a real chart boundary.
     w = (length / length.mean()) * np.maximum(np.exp(-d / max(d.mean(), 1e-12)), AFFINITY_FLOOR)
     W = sp.coo_matrix((np.r_[w, w], (np.r_[i, j], np.r_[j, i])), shape=(m, m)).tocsr()
     W.sum_duplicates()
     return W
+
+
+@njit(cache=True, nogil=True)
+def _affinity_terms(V, F, N, i, j, a, b, concave_weight, convex_weight):  # pragma: no cover
+    """:func:`face_affinity`'s angular distance ``d`` and shared-edge length of every face pair
+    ``(i, j)`` sharing the edge ``(a, b)``, compiled: one pass over the pairs instead of a
+    dozen gathers of (k, 3) arrays (face_affinity 11 -> 6 ms on the sample brain, 0.67 -> 0.30 s
+    at 1M faces). The same float64 operations in the same order as the array form (a test
+    checks the bits): centroids ``(V[F0] + V[F1] + V[F2]) / 3`` as ``V[F].mean(axis=1)``, dot
+    products summed from 0.0 coordinate by coordinate as the row sums of (k, 3) products.
+
+    Returns
+    -------
+    d, length : (k,) float64 ndarrays
+    """
+    k = len(i)
+    d = np.empty(k)
+    length = np.empty(k)
+    for q in range(k):
+        fi, fj = i[q], j[q]
+        dot = 0.0 + N[fi, 0] * N[fj, 0] + N[fi, 1] * N[fj, 1] + N[fi, 2] * N[fj, 2]
+        cos = min(max(dot, -1.0), 1.0)
+        side = 0.0  # > 0: j's centroid above i's plane, a concave edge
+        for c in range(3):
+            ci = (V[F[fi, 0], c] + V[F[fi, 1], c] + V[F[fi, 2], c]) / 3
+            cj = (V[F[fj, 0], c] + V[F[fj, 1], c] + V[F[fj, 2], c]) / 3
+            side += (cj - ci) * N[fi, c]
+        d[q] = (concave_weight if side > 0 else convex_weight) * (1.0 - cos)
+        e0, e1, e2 = V[a[q], 0] - V[b[q], 0], V[a[q], 1] - V[b[q], 1], V[a[q], 2] - V[b[q], 2]
+        length[q] = np.sqrt(0.0 + e0 * e0 + e1 * e1 + e2 * e2)
+    return d, length
 
 
 def integrated_curvature(
