@@ -63,7 +63,6 @@ from .mesh import (
     is_edge_manifold,
     mesh_arrays,
     unit_frame,
-    vertex_adjacency,
 )
 
 log = logging.getLogger(__name__)
@@ -320,11 +319,54 @@ def integrated_curvature(
     interior = np.bincount(F.ravel(), minlength=n) > 0
     interior[boundary_edges(F, edge_index=edge_index).ravel()] = False
     K = np.where(interior, 2 * np.pi - total, 0.0)
-    A = (vertex_adjacency(F, n, edge_index=edge_index) + sp.identity(n)).tocsr()
-    S = A @ sp.diags(1.0 / np.asarray(A.sum(axis=0)).ravel())
+    return float(np.abs(_spread(edge_index[0], n, K, passes)).sum())
+
+
+@njit(cache=True, nogil=True)
+def _spread(E, n, K, passes):  # pragma: no cover - compiled
+    """``S^passes K`` for :func:`integrated_curvature`'s ``S``: vertex ``i`` receives
+    ``K_j / |ring_j|`` from every ``j`` of its closed 1-ring (the vertices of the edges ``E``).
+
+    Compiled (2.8 -> 0.6 ms on the sample brain; integrated_curvature 0.43 -> 0.32 s at 1M
+    faces), the same bits as the sparse product ``(A + I) @ diag(1 / colsum) @ K`` it
+    replaces: each ring summed from 0.0 in decreasing vertex order, the order in which scipy's
+    product ``A @ diag`` leaves each row of ``S``.
+    """
+    size = np.ones(n, dtype=np.int64)  # closed ring sizes: the column sums of A + I
+    for e in range(len(E)):
+        size[E[e, 0]] += 1
+        size[E[e, 1]] += 1
+    start = np.zeros(n + 1, dtype=np.int64)
+    for v in range(n):
+        start[v + 1] = start[v] + size[v]
+    ring = np.empty(start[n], dtype=np.int64)
+    fill = start[:-1].copy()
+    for v in range(n):
+        ring[fill[v]] = v
+        fill[v] += 1
+    for e in range(len(E)):
+        a, b = E[e, 0], E[e, 1]
+        ring[fill[a]] = b
+        fill[a] += 1
+        ring[fill[b]] = a
+        fill[b] += 1
+    for v in range(n):  # each ring in decreasing order (insertion sort: rings are short)
+        for p in range(start[v] + 1, start[v + 1]):
+            u, q = ring[p], p
+            while q > start[v] and ring[q - 1] < u:
+                ring[q] = ring[q - 1]
+                q -= 1
+            ring[q] = u
+    share = 1.0 / size.astype(np.float64)
     for _ in range(passes):
-        K = S @ K
-    return float(np.abs(K).sum())
+        out = np.empty(n)
+        for v in range(n):
+            acc = 0.0
+            for p in range(start[v], start[v + 1]):
+                acc += share[ring[p]] * K[ring[p]]
+            out[v] = acc
+        K = out
+    return K
 
 
 def fiedler_bisect(W: np.ndarray | sp.spmatrix, *, seed: int = 0) -> np.ndarray:

@@ -233,6 +233,28 @@ def test_components_number_like_connected_components():
     assert np.array_equal(_relabel_components(labels, W), ref)
 
 
+def test_curvature_spread_is_the_sparse_product():
+    import scipy.sparse as sp
+
+    from segparam.mesh import vertex_adjacency
+    from segparam.segment import _spread
+
+    # S = (A + I) diag(1 / colsum), applied twice: the same bits, on a sphere, a grid with a
+    # boundary and a mesh with unused vertices.
+    rng = np.random.default_rng(0)
+    V0, F0 = icosphere()
+    meshes = [(len(V0), F0), (len(tri_grid(9, 7)[0]), tri_grid(9, 7)[1]), (60, F0[F0.max(1) < 50])]
+    for n, F in meshes:
+        K = rng.normal(size=n)
+        A = (vertex_adjacency(F, n) + sp.identity(n)).tocsr()
+        S = A @ sp.diags(1.0 / np.asarray(A.sum(axis=0)).ravel())
+        for passes in (1, 2, 3):
+            ref = K
+            for _ in range(passes):
+                ref = S @ ref
+            assert np.array_equal(_spread(edges(F)[0], n, K, passes), ref)
+
+
 def test_config_errors():
     with pytest.raises(ConfigError, match="n_charts is 0"):
         SegmentConfig(n_charts=0)
