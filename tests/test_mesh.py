@@ -183,6 +183,12 @@ def test_normals_and_areas():
     Vt, Ft = tetrahedron()
     centroid_dir = Vt[Ft].mean(1) - Vt.mean(0)
     assert (np.einsum("ij,ij->i", mesh.face_normals(Vt, Ft), centroid_dir) > 0).all()
+    # With the areas: the same bits as the two functions (a degenerate face included).
+    rng = np.random.default_rng(0)
+    for V, F in [(rng.normal(size=(50, 3)) * 1e3, rng.integers(0, 50, (200, 3))), torus()]:
+        N, area = mesh.face_normals(V, F, return_areas=True)
+        assert np.array_equal(N, mesh.face_normals(V, F))
+        assert np.array_equal(area, mesh.face_areas(V, F))
 
 
 def test_face_neighbors_and_is_disk():

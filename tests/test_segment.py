@@ -4,7 +4,7 @@ import trimesh
 from meshes import plate_with_holes, tri_grid
 
 from segparam.errors import ConfigError
-from segparam.mesh import connected_components, is_disk
+from segparam.mesh import connected_components, edges, is_disk
 from segparam.segment import SegmentConfig, _within, face_affinity, fiedler_bisect, segment
 
 
@@ -153,6 +153,108 @@ def test_affinity_and_bisection():
     assert abs(x[side].mean() - x[~side].mean()) > 0.4
 
 
+def test_affinity_is_its_row_sum_form():
+    import scipy.sparse as sp
+
+    from segparam.mesh import face_adjacency, face_normals
+
+    # The affinity as it was written with (k, 3) rows: the same bits, on a noisy sphere (both
+    # signs of every dot product), a CAD plate and a grid with a flat fold (zero dot products).
+    rng = np.random.default_rng(0)
+    V0, F0 = icosphere()
+    V1, F1 = tri_grid(10, 10)
+    V1 = np.c_[V1[:, :2], np.where(V1[:, 0] > 0.5, V1[:, 0] - 0.5, 0.0)]
+    for V, F in [(V0 + 0.05 * rng.normal(size=V0.shape), F0), plate_with_holes(), (V1, F1)]:
+        W = face_affinity(V, F, concave_weight=1.3, convex_weight=0.3)
+        N = face_normals(V, F)
+        C = V[F].mean(axis=1)
+        pairs, edge = face_adjacency(F)
+        E = edges(F)[0]
+        i, j = pairs[:, 0], pairs[:, 1]
+        cos = np.clip((N[i] * N[j]).sum(axis=1), -1.0, 1.0)
+        concave = ((C[j] - C[i]) * N[i]).sum(axis=1) > 0
+        d = np.where(concave, 1.3, 0.3) * (1.0 - cos)
+        length = np.linalg.norm(V[E[edge, 0]] - V[E[edge, 1]], axis=1)
+        w = (length / length.mean()) * np.maximum(np.exp(-d / max(d.mean(), 1e-12)), 0.05)
+        m = len(F)
+        ref = sp.coo_matrix((np.r_[w, w], (np.r_[i, j], np.r_[j, i])), shape=(m, m)).tocsr()
+        for a in ("data", "indices", "indptr"):
+            assert np.array_equal(getattr(W, a), getattr(ref, a))
+
+
+def test_feature_regions_are_their_row_sum_form():
+    import scipy.sparse as sp
+
+    from segparam.mesh import face_normals
+    from segparam.segment import _merge_small, feature_regions
+
+    # As written before with both directions of every edge and (k, 3) row sums.
+    rng = np.random.default_rng(1)
+    V0, F0 = icosphere()
+    for V, F in [(V0 + 0.08 * rng.normal(size=V0.shape), F0), plate_with_holes()]:
+        W = face_affinity(V, F)
+        N = face_normals(V, F)
+        for angle, min_faces in ((20.0, 1), (45.0, 4), (60.0, 16), (180.0, 2)):
+            C = W.tocoo()
+            smooth = (N[C.row] * N[C.col]).sum(axis=1) >= np.cos(np.radians(angle))
+            G = sp.coo_matrix((np.ones(smooth.sum()), (C.row[smooth], C.col[smooth])), W.shape)
+            ref = _merge_small(_graph_components(G), W, min_faces)
+            ref = np.unique(ref, return_inverse=True)[1]
+            assert np.array_equal(feature_regions(V, F, W, angle, min_faces, N), ref)
+
+
+def _graph_components(G):
+    from scipy.sparse.csgraph import connected_components as cc
+
+    return cc(G.tocsr(), directed=False)[1].astype(np.int64)
+
+
+def test_components_number_like_connected_components():
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components as cc
+
+    from segparam.segment import _components, _edge_pairs, _relabel_components
+
+    # Half the edges, in CSR order, give the components of the whole symmetric graph, numbered
+    # alike; so do the charts' pieces.
+    rng = np.random.default_rng(0)
+    V, F = tri_grid(20, 20)
+    W = face_affinity(V, F)
+    i, j = _edge_pairs(W)
+    assert len(i) == W.nnz // 2 and (i < j).all()
+    for p in (0.3, 0.5, 0.7):
+        keep = rng.random(len(i)) < p
+        half = _components(i[keep], j[keep], len(F))
+        sym = np.r_[i[keep], j[keep]], np.r_[j[keep], i[keep]]
+        G = sp.csr_matrix((np.ones(2 * keep.sum()), sym), shape=W.shape)
+        assert np.array_equal(half, cc(G, directed=False)[1])
+    labels = rng.integers(0, 5, len(F))
+    ref = cc(_within(W, labels), directed=False)[1]
+    assert np.array_equal(_relabel_components(labels, W), ref)
+
+
+def test_curvature_spread_is_the_sparse_product():
+    import scipy.sparse as sp
+
+    from segparam.mesh import vertex_adjacency
+    from segparam.segment import _spread
+
+    # S = (A + I) diag(1 / colsum), applied twice: the same bits, on a sphere, a grid with a
+    # boundary and a mesh with unused vertices.
+    rng = np.random.default_rng(0)
+    V0, F0 = icosphere()
+    meshes = [(len(V0), F0), (len(tri_grid(9, 7)[0]), tri_grid(9, 7)[1]), (60, F0[F0.max(1) < 50])]
+    for n, F in meshes:
+        K = rng.normal(size=n)
+        A = (vertex_adjacency(F, n) + sp.identity(n)).tocsr()
+        S = A @ sp.diags(1.0 / np.asarray(A.sum(axis=0)).ravel())
+        for passes in (1, 2, 3):
+            ref = K
+            for _ in range(passes):
+                ref = S @ ref
+            assert np.array_equal(_spread(edges(F)[0], n, K, passes), ref)
+
+
 def test_config_errors():
     with pytest.raises(ConfigError, match="n_charts is 0"):
         SegmentConfig(n_charts=0)
@@ -237,6 +339,74 @@ def test_majority_filter_reaches_a_fixed_point(seed):
     assert _cut_edges(F, out) < 0.5 * _cut_edges(F, labels)
 
 
+def _majority_reference(nbr, labels, passes):
+    """The majority filter as arrays, as it was before it was compiled."""
+    L = np.where(nbr >= 0, labels[np.maximum(nbr, 0)], -1)
+    below = (nbr >= 0) & (nbr < np.arange(len(labels))[:, None])
+    for _ in range(passes):
+        own, new = labels, labels.copy()
+        for a, b in ((0, 1), (0, 2), (1, 2)):
+            if b < nbr.shape[1]:
+                agree = (L[:, a] == L[:, b]) & (L[:, a] >= 0) & (L[:, a] != own)
+                new = np.where(agree & (new == own), L[:, a], new)
+        moved = new != own
+        swap = (below & (L == new[:, None]) & (new[np.maximum(nbr, 0)] == own[:, None])).any(1)
+        new[swap & moved] = own[swap & moved]
+        if np.array_equal(new, labels):
+            break
+        labels = new
+        L = np.where(nbr >= 0, labels[np.maximum(nbr, 0)], -1)
+    return labels
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_majority_filter_is_the_array_form(seed):
+    from segparam.segment import _smooth_boundaries
+
+    # A grid with noisy labels of 2 to 9 charts, and random graphs with 2 to 5 slots (the vote
+    # reads the first three; the trading rule all of them).
+    rng = np.random.default_rng(seed)
+    V, F, nbr, _ = _grid_graph(30)
+    C = V[F].mean(axis=1)
+    for n_labels in (2, 9):
+        labels = (C[:, 0] * n_labels + 0.3 * rng.random(len(F))).astype(np.int64) % n_labels
+        for passes in (1, 4, 50):
+            out = _smooth_boundaries(nbr, labels, passes)
+            assert np.array_equal(out, _majority_reference(nbr, labels, passes))
+    for width in (2, 3, 5):
+        m = 500
+        nbr = rng.integers(-1, m, (m, width))
+        labels = rng.integers(0, 4, m)
+        assert np.array_equal(
+            _smooth_boundaries(nbr, labels, 6), _majority_reference(nbr, labels, 6)
+        )
+
+
+def test_compact_and_within_are_their_sort_forms():
+    import scipy.sparse as sp
+
+    from segparam.segment import _compact
+
+    rng = np.random.default_rng(0)
+    for n in (1, 7, 1000):
+        labels = rng.integers(0, n, 3000) * 3 + 1  # gaps: labels not in use
+        assert np.array_equal(_compact(labels), np.unique(labels, return_inverse=True)[1])
+    V, F = tri_grid(20, 20)
+    W = face_affinity(V, F)
+    labels = rng.integers(0, 4, len(F))
+    C = W.tocoo()
+    same = labels[C.row] == labels[C.col]
+    ref = sp.csr_matrix((C.data[same], (C.row[same], C.col[same])), shape=W.shape)
+    rows = np.repeat(np.arange(len(F)), np.diff(W.indptr))
+    flip = np.lexsort((-W.indices, rows))  # each row's columns descending: not canonical
+    unsorted = sp.csr_matrix((W.data[flip], W.indices[flip], W.indptr), shape=W.shape)
+    assert not unsorted.has_canonical_format
+    for M in (W, unsorted):
+        out = _within(M, labels)
+        for a in ("data", "indices", "indptr"):
+            assert np.array_equal(getattr(out, a), getattr(ref, a))
+
+
 def test_heat_coefficients_expand_the_exponential():
     from segparam.segment import _heat_coefficients
 
@@ -267,6 +437,101 @@ def test_rounding_is_threshold_dynamics_of_the_heat_kernel(t):
     assert (ref != labels).sum() > 10  # the test has something to check
     # The default band (1.5 sqrt(t) rings) gives the same labels as the full diffusion.
     assert np.array_equal(_round_charts(nbr, P, labels, diffusion_time=t), ref)
+
+
+def _band_reference(nbr, labels, n_labels, rings):
+    """The rounding band as it was computed before it was compiled: rings of sorted keys grown
+    with np.unique / np.isin, each pair's neighbours looked up by searchsorted."""
+    nb_lab = np.where(nbr >= 0, labels[np.maximum(nbr, 0)], -1)
+    cross = (nb_lab >= 0) & (nb_lab != labels[:, None])
+    f0 = np.flatnonzero(cross.any(axis=1))
+    fc, sc = np.nonzero(cross)
+    ring = np.unique(np.r_[fc * n_labels + nb_lab[fc, sc], f0 * n_labels + labels[f0]])
+    prev, out = ring[:0], [ring]
+    for _ in range(rings):
+        f, k = np.divmod(ring, n_labels)
+        g = nbr[f]
+        keys = np.unique((g * n_labels + k[:, None])[g >= 0])
+        keys = keys[~np.isin(keys, ring) & ~np.isin(keys, prev)]
+        if len(keys) == 0:
+            break
+        prev, ring = ring, keys
+        out.append(ring)
+    keys = np.sort(np.concatenate(out))
+    f, k = np.divmod(keys, n_labels)
+    g = nbr[f]
+    gk = g * n_labels + k[:, None]
+    j = np.minimum(np.searchsorted(keys, gk), len(keys) - 1)
+    return keys, np.where((g >= 0) & (keys[j] == gk), j, -1)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_band_and_its_diffusion_are_the_sparse_computation(seed):
+    import scipy.sparse as sp
+
+    from segparam.segment import _band, _heat_band, _heat_coefficients, _neighbor_table, _vote
+
+    # Graphs with unused slots (a grid's border, the edges inside a CAD plate's feature
+    # regions), noisy labels of few and many charts, bands of 0 to 9 rings.
+    rng = np.random.default_rng(seed)
+    V, F = tri_grid(30, 20) if seed != 1 else plate_with_holes()
+    W = face_affinity(V, F)
+    if seed == 1:
+        normals = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        C = W.tocoo()
+        keep = (normals[C.row] * normals[C.col]).sum(axis=1) > 0.5
+        W = sp.csr_matrix((C.data[keep], (C.row[keep], C.col[keep])), shape=W.shape)
+    nbr, P = _neighbor_table(W)
+    C = V[F].mean(axis=1)
+    for n_labels in (2, 7, 40):
+        labels = rng.integers(0, n_labels, 8)[
+            np.argmin(((C[:, None, :2] - rng.random((1, 8, 2)) * C[:, :2].max(0)) ** 2).sum(2), 1)
+        ]
+        noisy = rng.random(len(F)) < 0.05
+        labels[noisy] = rng.integers(0, n_labels, noisy.sum())
+        for rings in (0, 3, 9):
+            keys, col = _band(nbr, labels, n_labels, rings)
+            ref_keys, ref_col = _band_reference(nbr, labels, n_labels, rings)
+            assert np.array_equal(keys, ref_keys) and np.array_equal(col, ref_col)
+        # The diffusion and the vote: the same float32 bits and labels as the sparse products
+        # and array operations they replace.
+        f, k = np.divmod(keys, n_labels)
+        g = nbr[f]
+        Pf = P[f].astype(np.float32)
+        inside = (g >= 0) & (col < 0) & (labels[np.maximum(g, 0)] == k[:, None])
+        held = (Pf * inside).sum(axis=1)
+        start = (labels[f] == k).astype(np.float32)
+        coef = _heat_coefficients(32.0).astype(np.float32)
+        found = col >= 0
+        rows = np.broadcast_to(np.arange(len(keys))[:, None], col.shape)[found]
+        A = sp.csr_matrix((Pf[found], (rows, col[found])), shape=(len(keys), len(keys)))
+        t_prev, t_cur = start, -(A @ start + held)
+        a_prev, a_cur = 1.0, -1.0
+        value = coef[0] * t_prev + coef[1] * t_cur
+        for ck in coef[2:]:
+            t_next = -2.0 * (A @ t_cur + a_cur * held) - t_prev
+            t_prev, t_cur, a_prev, a_cur = t_cur, t_next, a_cur, -2.0 * a_cur - a_prev
+            value += ck * t_cur
+        out = _heat_band(keys, col, nbr, P, labels, n_labels, coef)
+        assert out.dtype == np.float32 and np.array_equal(out.view(np.int32), value.view(np.int32))
+        value += 1e-6 * (labels[f] == k)
+        new_face = np.r_[True, f[1:] != f[:-1]]
+        run = np.cumsum(new_face) - 1
+        best = np.maximum.reduceat(value, np.flatnonzero(new_face))
+        cand = np.flatnonzero(value == best[run])
+        win = cand[np.r_[True, run[cand][1:] != run[cand][:-1]]]
+        ref = labels.copy()
+        ref[f[win]] = k[win]
+        assert np.array_equal(_vote(keys, out, labels, n_labels), ref)
+        # ties: equal values go to the face's own chart, then to its lowest
+        tied = _vote(keys, np.zeros(len(keys), np.float32), labels, n_labels)
+        own = np.zeros(len(F), dtype=bool)
+        own[f[labels[f] == k]] = True
+        faces, at = np.unique(f, return_index=True)
+        first = np.full(len(F), -1)
+        first[faces] = k[at]  # a face's lowest chart in the band
+        assert np.array_equal(tied, np.where(own, labels, np.where(first >= 0, first, labels)))
 
 
 def test_rounding_straightens_a_jagged_border():
