@@ -360,7 +360,7 @@ def _merge_vertices(V: np.ndarray, tol: float) -> np.ndarray:
     labels, first = _group_rows(V + 0.0)  # + 0.0 turns -0.0 into 0.0
     if tol > 0 and len(first) > 1:
         # Exact duplicates are already one point, so the tree sees only distinct positions.
-        pairs = cKDTree(V[first]).query_pairs(tol, output_type="ndarray")
+        pairs = _close_pairs(V[first], tol)
         if len(pairs):
             g = len(first)
             G = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(g, g))
@@ -369,6 +369,47 @@ def _merge_vertices(V: np.ndarray, tol: float) -> np.ndarray:
             np.minimum.at(lowest, cluster, first)
             return lowest[cluster[labels]]
     return first[labels]
+
+
+# Slab half-width of the sweep in _close_pairs, in merge tolerances: a pair within the tolerance
+# is within it along every axis; twice as wide leaves room for rounding.
+_SWEEP_SLACK = 2.0
+# Candidate pairs of the sweep per point above which the k-d tree is built right away: a grid
+# has rows of equal coordinates along every axis (1 000 x 1 000 grid: 5e8 pairs); 1,573 pairs
+# for the 500k points of the 1M-face brain.
+_SWEEP_MAX_PAIRS = 4
+
+
+def _close_pairs(P: np.ndarray, tol: float) -> np.ndarray:
+    """``cKDTree(P).query_pairs(tol)``, but the tree is built only if some pair may be that close.
+
+    A sweep along the longest axis lists the pairs within ``2 tol`` along that axis (one sort);
+    when none of them is within ``2 tol`` in 3-D either, no pair is within ``tol`` and the tree
+    is not built (0.57 s of 0.69 s in merging the 500k vertices of the 1M-face brain, where
+    1,573 pairs are that close along the axis and none in 3-D). Otherwise the tree answers, so
+    the pairs are exactly its own.
+
+    Returns
+    -------
+    (k, 2) int ndarray
+        Point index pairs ``i < j``.
+    """
+    n = len(P)
+    width = _SWEEP_SLACK * tol
+    x = P[:, int(np.argmax(np.ptp(P, axis=0)))]
+    order = np.argsort(x, kind="stable")
+    xs = x[order]
+    count = np.searchsorted(xs, xs + width, side="right") - np.arange(1, n + 1)
+    total = int(count.sum())
+    if total == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    if total <= _SWEEP_MAX_PAIRS * n:
+        i = np.repeat(np.arange(n), count)
+        j = i + 1 + np.arange(total) - np.repeat(np.cumsum(count) - count, count)
+        d = P[order[i]] - P[order[j]]
+        if not np.any(np.einsum("ij,ij->i", d, d) <= width * width):
+            return np.zeros((0, 2), dtype=np.int64)
+    return cKDTree(P).query_pairs(tol, output_type="ndarray")
 
 
 def _next(h: np.ndarray) -> np.ndarray:

@@ -403,3 +403,29 @@ def test_negative_tolerance_is_rejected():
     V, F = tri_grid(3, 3)
     with pytest.raises(InvalidMeshError, match="tolerances must be >= 0"):
         clean(V, F, merge_tolerance=-1.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Helpers against the computations they replace
+# ---------------------------------------------------------------------------------------------
+
+
+def test_close_pairs_are_the_kd_tree_pairs():
+    """The sweep in front of the k-d tree changes nothing: no pair, some pairs, grid fallback."""
+    from scipy.spatial import cKDTree
+
+    from segparam.clean import _close_pairs
+
+    rng = np.random.default_rng(4)
+    grid = tri_grid(30, 30)[0]
+    for t in range(60):
+        P = rng.normal(size=(int(rng.integers(2, 400)), 3)) * 10.0 ** rng.integers(-3, 4)
+        if t % 3 == 0:  # near-duplicates, some closer than the tolerance, some just beyond
+            k = int(rng.integers(1, len(P) + 1))
+            P = np.vstack([P, P[:k] + rng.normal(size=(k, 3)) * 10.0 ** rng.integers(-12, -6)])
+        if t % 5 == 0:
+            P = grid + rng.normal(size=grid.shape) * 1e-12 * (t % 2)
+        tol = 1e-9 * float(np.linalg.norm(np.ptp(P, axis=0))) * 10.0 ** rng.integers(0, 4)
+        want = cKDTree(P).query_pairs(tol, output_type="ndarray")
+        got = _close_pairs(P, tol)
+        assert {tuple(p) for p in got.tolist()} == {tuple(p) for p in want.tolist()}
