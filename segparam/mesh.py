@@ -158,10 +158,13 @@ def mesh_arrays(V: Any, F: Any = None) -> tuple[Any, Any]:
 def _face_cross(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """``(V[F1] - V[F0]) x (V[F2] - V[F0])`` per face, coordinate by coordinate: the same bits as
     ``np.cross`` in 0.12 s instead of 0.21 s at 1M faces (``np.cross`` moves axes and
-    broadcasts; this gathers each coordinate once)."""
+    broadcasts; this gathers each coordinate once). The gathers are nine 1-D ``take``: indexing
+    the second axis of a 2-D array, ``Vt[:, Ft[k]]``, took three times as long (0.13 s against
+    0.04 s at 1M faces)."""
     Vt, Ft = np.ascontiguousarray(V.T), np.ascontiguousarray(F.T)
-    x = Vt[:, Ft[0]]
-    u, w = Vt[:, Ft[1]] - x, Vt[:, Ft[2]] - x
+    x = [c.take(Ft[0]) for c in Vt]
+    u = [c.take(Ft[1]) - x0 for c, x0 in zip(Vt, x, strict=True)]
+    w = [c.take(Ft[2]) - x0 for c, x0 in zip(Vt, x, strict=True)]
     return np.stack(
         [u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]], 1
     )

@@ -296,3 +296,13 @@ def test_disk_labels_fast_path_on_manifold_meshes_agrees_with_the_general_test(h
     lab = np.zeros(len(F), dtype=np.int64)
     for manifold_edges in (None, mesh.edges(F)):
         assert not mesh.disk_labels(F, lab, 1, manifold_edges=manifold_edges)[0]
+
+
+def test_face_cross_is_numpys_cross_bit_for_bit():
+    rng = np.random.default_rng(7)
+    for scale in (1e-9, 1.0, 1e12):
+        V = rng.normal(size=(50, 3)) * scale + rng.normal(size=3) * scale * 10
+        F = rng.integers(0, 50, size=(400, 3))
+        want = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+        got = mesh._face_cross(V, F)
+        assert got.shape == want.shape and got.tobytes() == want.tobytes()
