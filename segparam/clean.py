@@ -216,7 +216,8 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
     reason = np.zeros(m, dtype=np.int8)  # index into _REASONS; 0: kept
     repeated = (Fm[:, 0] == Fm[:, 1]) | (Fm[:, 1] == Fm[:, 2]) | (Fm[:, 0] == Fm[:, 2])
     reason[repeated] = _REASONS.index(REASON_REPEATED)
-    zero = ~repeated & (face_areas(V, Fm) <= area_tol * diag**2)
+    area = face_areas(V, Fm)  # the output faces' areas too (step 5): same corners, same bits
+    zero = ~repeated & (area <= area_tol * diag**2)
     reason[zero] = _REASONS.index(REASON_ZERO_AREA)
     alive = np.flatnonzero(~(repeated | zero))
     labels, first = _group_rows(np.sort(Fm[alive], axis=1).astype(np.int64))
@@ -234,8 +235,8 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
     glue, split_edges, glue_edges = _glue_pairs(Fm)
     cut = 0
     while True:
-        Fs, vsrc, glue, h2e = _split(Fm, glue, glue_edges)
-        parity, comp, ncomp, conflicts = _parity(Fs, h2e)
+        Fs, vsrc, glue, h2e, count = _split(Fm, glue, glue_edges)
+        parity, comp, ncomp, conflicts = _parity(Fs, h2e, count)
         if len(conflicts) == 0:
             break
         key_c = _pair_keys(conflicts, len(Fm))
@@ -263,7 +264,7 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
         logger.debug("clean: removed %d faces that keep a surface non-orientable", len(drop))
 
     Vout = V[vsrc]
-    parity = _orient_components(Vout, Fs, h2e, parity, comp, ncomp)
+    parity = _orient_components(Vout, Fs, count[h2e], parity, comp, ncomp, area[fidx])
     Fo = np.where(parity[:, None], Fs[:, [0, 2, 1]], Fs)
 
     removed = np.flatnonzero(reason)
@@ -491,7 +492,7 @@ def _split_corners(F: np.ndarray, glue: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 def _split(
     F: np.ndarray, glue: np.ndarray, edge_index: tuple | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Split into fans; where an edge still has more than two faces, cut its extra faces free.
 
     An extra face (not in the edge's glued pair) can end up on the same two vertex copies
@@ -510,6 +511,8 @@ def _split(
         The glue pairs that remain.
     h2e : (3 m,) int64 ndarray
         Edge of every half-edge of ``Fs`` (:func:`segparam.mesh.edges`).
+    count : (e,) int64 ndarray
+        Faces of every edge, ``np.bincount(h2e)``.
     """
     while True:
         Fs, src = _split_corners(F, glue)
@@ -518,7 +521,7 @@ def _split(
         count = np.bincount(h2e, minlength=len(E))
         hbad = np.flatnonzero(count[h2e] > 2)
         if len(hbad) == 0:
-            return Fs, src, glue, h2e
+            return Fs, src, glue, h2e, count
         # On each bad edge keep one glued pair (the one glued first), free the others.
         partner = np.full(3 * len(F), -1, dtype=np.int64)
         partner[glue[:, 0]], partner[glue[:, 1]] = glue[:, 1], glue[:, 0]
@@ -536,11 +539,13 @@ def _split(
         logger.debug("clean: %d edges still non-manifold after splitting", len(np.unique(e)))
         if not drop.any():  # cannot happen by construction; do not loop forever
             logger.warning("clean: could not split %d non-manifold edges", len(np.unique(e)))
-            return Fs, src, glue, h2e
+            return Fs, src, glue, h2e, count
         glue = glue[~drop]
 
 
-def _parity(Fs: np.ndarray, h2e: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
+def _parity(
+    Fs: np.ndarray, h2e: np.ndarray, count: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
     """Relative orientation of every face from a BFS spanning tree of the face graph.
 
     Two faces on an edge agree when they traverse it in opposite directions. The parity of a
@@ -560,7 +565,6 @@ def _parity(Fs: np.ndarray, h2e: np.ndarray) -> tuple[np.ndarray, np.ndarray, in
     """
     m = len(Fs)
     flat = Fs.ravel()
-    count = np.bincount(h2e)
     if count.max(initial=0) <= 2:  # as _split leaves it: the first and last half-edge, no sort
         first, last = edge_half_edges(h2e, len(count))
         two = np.flatnonzero(count == 2)
@@ -607,32 +611,35 @@ def _parity(Fs: np.ndarray, h2e: np.ndarray) -> tuple[np.ndarray, np.ndarray, in
 def _orient_components(
     V: np.ndarray,
     Fs: np.ndarray,
-    h2e: np.ndarray,
+    half_count: np.ndarray,
     parity: np.ndarray,
     comp: np.ndarray,
     ncomp: int,
+    area: np.ndarray,
 ) -> np.ndarray:
     """Choose each component's global orientation; returns the final per-face flip, (m,) bool.
 
     Closed components get a positive signed volume. Open components (and closed ones of
     negligible volume) keep the input winding of the larger part of their area.
+
+    ``half_count`` is the number of faces on the edge of every half-edge, ``area`` the face
+    areas (:func:`_clean` has both). The corners are three (m, 3) row gathers (``V[Fo]``, one
+    (m, 3, 3) gather, took 0.30 s at 1M faces) with the same sums in the same order; the signed
+    volumes stay one ``np.einsum`` over (m, 3) rows, whose summation order depends on the CPU's
+    vector width.
     """
     Fo = np.where(parity[:, None], Fs[:, [0, 2, 1]], Fs)
-    P = V[Fo]
-    area = face_areas(V, Fo)
-    on_boundary = (np.bincount(h2e)[h2e] == 1).reshape(-1, 3).any(axis=1)
+    P = [V.take(corner, axis=0) for corner in np.ascontiguousarray(Fo.T)]  # (m, 3) each
+    on_boundary = (half_count == 1).reshape(-1, 3).any(axis=1)
     closed = np.bincount(comp, weights=on_boundary, minlength=ncomp) == 0
     # Volume about each component's centroid, for accuracy far from the origin.
     nf = np.bincount(comp, minlength=ncomp)
-    cen = (
-        np.stack(
-            [np.bincount(comp, weights=P[:, :, k].mean(axis=1), minlength=ncomp) for k in range(3)],
-            axis=1,
-        )
-        / nf[:, None]
-    )
-    P = P - cen[comp][:, None, :]
-    vol6 = np.einsum("ij,ij->i", P[:, 0], np.cross(P[:, 1], P[:, 2]))
+    mean = (P[0] + P[1] + P[2]) / 3  # each face's centroid, as V[Fo].mean(axis=1)
+    cen = np.stack([np.bincount(comp, weights=mean[:, k], minlength=ncomp) for k in range(3)], 1)
+    cen = cen / nf[:, None]
+    at = cen[comp] if ncomp > 1 else cen
+    p, a, b = (x - at for x in P)
+    vol6 = np.einsum("ij,ij->i", p, np.cross(a, b))
     vol = np.bincount(comp, weights=vol6, minlength=ncomp) / 6
     total = np.bincount(comp, weights=area, minlength=ncomp)
     flipped = np.bincount(comp, weights=area * parity, minlength=ncomp)
