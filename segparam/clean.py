@@ -448,6 +448,15 @@ def _glue_pairs(F: np.ndarray) -> tuple[np.ndarray, int, tuple]:
     E, h2e = edges(F)
     count = np.bincount(h2e, minlength=len(E))
     regular = (count[h2e] == 2).reshape(-1, 3).sum(axis=1)  # interior edges of each face
+    if count.max(initial=0) <= 2:
+        # Every edge has its first and last half-edge: the same pairs without the sort of all
+        # half-edges (0.32 s at 1M faces), the face with more interior edges first.
+        first, last = edge_half_edges(h2e, len(E))
+        two = np.flatnonzero(count == 2)
+        a, b = first[two], last[two]
+        swap = regular[b // 3] > regular[a // 3]
+        glue = np.stack([np.where(swap, b, a), np.where(swap, a, b)], axis=1)
+        return glue, 0, (E, h2e)
     h = np.arange(len(h2e))
     order = np.lexsort((h, -regular[h // 3], h2e))
     hs = h2e[order]
@@ -590,15 +599,15 @@ def _parity(
     pred = pred.astype(np.int64)
     pred[m] = m
 
-    # Disagreement on each tree edge (pred[f], f), looked up among the adjacent pairs.
-    keys = np.minimum(fa, fb) * (m + 1) + np.maximum(fa, fb)
-    ko = np.argsort(keys)
-    f = np.arange(m)
-    tree = np.minimum(pred[:m], f) * (m + 1) + np.maximum(pred[:m], f)
-    loc = np.clip(np.searchsorted(keys[ko], tree), 0, max(len(keys) - 1, 0))
+    # Disagreement on each tree edge (pred[f], f): the half-edge of f whose face across is
+    # pred[f] (two faces share at most one edge, or they would be duplicates), instead of looking
+    # the pair up among the sorted pairs (0.30 s at 1M faces).
+    across = np.full(3 * m, -1, dtype=np.int64)  # never m, the virtual root
+    across[ha], across[hb] = fb, fa
+    disagree = np.zeros(3 * m, dtype=bool)
+    disagree[ha], disagree[hb] = rel, rel
     acc = np.zeros(m + 1, dtype=bool)
-    if len(keys):
-        acc[:m] = (pred[:m] != m) & rel[ko[loc]]
+    acc[:m] = ((across.reshape(m, 3) == pred[:m, None]) & disagree.reshape(m, 3)).any(axis=1)
     p = pred
     while not np.all(p == m):
         acc = acc ^ acc[p]

@@ -429,3 +429,27 @@ def test_close_pairs_are_the_kd_tree_pairs():
         want = cKDTree(P).query_pairs(tol, output_type="ndarray")
         got = _close_pairs(P, tol)
         assert {tuple(p) for p in got.tolist()} == {tuple(p) for p in want.tolist()}
+
+
+def test_glue_pairs_without_sort_are_the_sorted_pairs():
+    """On edge-manifold faces the pairs come from each edge's first and last half-edge; they are
+    the pairs of the sort by edge, interior edges of the face (more first) and half-edge."""
+    from segparam.clean import _glue_pairs
+
+    rng = np.random.default_rng(5)
+    for _ in range(40):
+        V, F = tri_grid(int(rng.integers(2, 9)), int(rng.integers(2, 9)))
+        F = F[rng.random(len(F)) < 0.8]
+        F = np.where((rng.random(len(F)) < 0.3)[:, None], F[:, ::-1], F)[rng.permutation(len(F))]
+        if len(F) == 0:
+            continue
+        E, h2e = mesh.edges(F)
+        count = np.bincount(h2e, minlength=len(E))
+        regular = (count[h2e] == 2).reshape(-1, 3).sum(axis=1)
+        h = np.arange(len(h2e))
+        order = np.lexsort((h, -regular[h // 3], h2e))
+        lead = np.flatnonzero(count[h2e[order]] == 2)[::2]
+        want = np.stack([order[lead], order[lead + 1]], axis=1)
+        glue, nonmanifold, _ = _glue_pairs(F)
+        np.testing.assert_array_equal(glue, want)
+        assert nonmanifold == 0
