@@ -617,6 +617,18 @@ def _parity(
     return parity, comp.astype(np.int64), int(ncomp), np.stack([ha[bad], hb[bad]], axis=1)
 
 
+def _cross(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """``np.cross(a, b)`` of (k, 3) arrays, written into ``out``: the same products and
+    differences, with one (k,) temporary instead of ``np.cross``'s (k, 3) ones (fresh memory
+    costs more than the arithmetic here: 0.22 -> 0.05 s at 1M faces)."""
+    tmp = np.empty(len(a))
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        np.multiply(a[:, j], b[:, k], out=out[:, i])
+        np.multiply(a[:, k], b[:, j], out=tmp)
+        out[:, i] -= tmp
+    return out
+
+
 def _orient_components(
     V: np.ndarray,
     Fs: np.ndarray,
@@ -633,9 +645,10 @@ def _orient_components(
 
     ``half_count`` is the number of faces on the edge of every half-edge, ``area`` the face
     areas (:func:`_clean` has both). The corners are three (m, 3) row gathers (``V[Fo]``, one
-    (m, 3, 3) gather, took 0.30 s at 1M faces) with the same sums in the same order; the signed
-    volumes stay one ``np.einsum`` over (m, 3) rows, whose summation order depends on the CPU's
-    vector width.
+    (m, 3, 3) gather, took 0.30 s at 1M faces) with the same sums in the same order, centred in
+    place; the signed volumes stay one ``np.einsum`` over (m, 3) rows, whose summation order
+    depends on the CPU's vector width. In place because fresh memory is what costs here: in the
+    middle of :func:`clean` this took 0.58 s at 1M faces with new arrays, 0.20 s without.
     """
     Fo = np.where(parity[:, None], Fs[:, [0, 2, 1]], Fs)
     P = [V.take(corner, axis=0) for corner in np.ascontiguousarray(Fo.T)]  # (m, 3) each
@@ -643,12 +656,15 @@ def _orient_components(
     closed = np.bincount(comp, weights=on_boundary, minlength=ncomp) == 0
     # Volume about each component's centroid, for accuracy far from the origin.
     nf = np.bincount(comp, minlength=ncomp)
-    mean = (P[0] + P[1] + P[2]) / 3  # each face's centroid, as V[Fo].mean(axis=1)
+    mean = P[0] + P[1]
+    mean += P[2]
+    mean /= 3  # each face's centroid, as V[Fo].mean(axis=1)
     cen = np.stack([np.bincount(comp, weights=mean[:, k], minlength=ncomp) for k in range(3)], 1)
     cen = cen / nf[:, None]
     at = cen[comp] if ncomp > 1 else cen
-    p, a, b = (x - at for x in P)
-    vol6 = np.einsum("ij,ij->i", p, np.cross(a, b))
+    for x in P:
+        x -= at
+    vol6 = np.einsum("ij,ij->i", P[0], _cross(P[1], P[2], out=mean))
     vol = np.bincount(comp, weights=vol6, minlength=ncomp) / 6
     total = np.bincount(comp, weights=area, minlength=ncomp)
     flipped = np.bincount(comp, weights=area * parity, minlength=ncomp)
