@@ -560,7 +560,8 @@ def _parity(
     Two faces on an edge agree when they traverse it in opposite directions. The parity of a
     face (flip it or not) is the XOR of the disagreements along its tree path to the root of its
     component, computed for all faces at once by pointer doubling. One virtual root joined to
-    the first face of every component makes it a single BFS.
+    the first face of every component makes it a single BFS. Where no two faces disagree, every
+    parity is False without a tree.
 
     Returns
     -------
@@ -590,6 +591,15 @@ def _parity(
 
     G = sp.coo_matrix((np.ones(len(fa)), (fa, fb)), shape=(m, m))
     ncomp, comp = _cc(G, directed=False)
+    if not rel.any():
+        # Consistently oriented already: every tree path XORs to False, nothing conflicts, and
+        # the tree is not needed (0.3 s at 1M faces).
+        return (
+            np.zeros(m, dtype=bool),
+            comp.astype(np.int64),
+            int(ncomp),
+            np.zeros((0, 2), np.int64),
+        )
     roots = np.full(ncomp, m, dtype=np.int64)
     np.minimum.at(roots, comp, np.arange(m))
     rows = np.concatenate([fa, np.full(ncomp, m)])
