@@ -220,10 +220,13 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
     zero = ~repeated & (area <= area_tol * diag**2)
     reason[zero] = _REASONS.index(REASON_ZERO_AREA)
     alive = np.flatnonzero(~(repeated | zero))
-    labels, first = _group_rows(np.sort(Fm[alive], axis=1).astype(np.int64))
-    dup = alive[first[labels] != np.arange(len(alive))]
-    reason[dup] = _REASONS.index(REASON_DUPLICATE)
-    alive = alive[first[labels] == np.arange(len(alive))]
+    Fm = Fm[alive]
+    edge_index = edges(Fm)  # serves step 4 too: removing duplicates empties no edge
+    dup = _duplicates(Fm, edge_index)
+    if dup.any():
+        reason[alive[dup]] = _REASONS.index(REASON_DUPLICATE)
+        alive, Fm = alive[~dup], Fm[~dup]
+        edge_index = (edge_index[0], edge_index[1].reshape(-1, 3)[~dup].ravel())
     if len(alive) == 0:
         codes, counts = np.unique(reason, return_counts=True)
         what = ", ".join(f"{c} {_REASONS[r]}" for r, c in zip(codes, counts, strict=True))
@@ -231,8 +234,7 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
 
     # 4. + 5. split, orient, cut non-orientable components
     fidx = alive
-    Fm = Fm[alive]
-    glue, split_edges, glue_edges = _glue_pairs(Fm)
+    glue, split_edges, glue_edges = _glue_pairs(Fm, edge_index)
     cut = 0
     while True:
         Fs, vsrc, glue, h2e, count = _split(Fm, glue, glue_edges)
@@ -356,6 +358,29 @@ def _group_rows(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return labels, first
 
 
+def _duplicates(F: np.ndarray, edge_index: tuple) -> np.ndarray:
+    """Faces with the same three vertices as an earlier face (either winding), (m,) bool.
+
+    ``edge_index`` is ``edges(F)``. Where no edge has more than two faces, two faces with the
+    same vertices are the only faces of all three of their edges, so a face is a duplicate when
+    the face across each of its half-edges is one and the same earlier face: no sort of the
+    faces (0.23 -> 0.14 s at 1M faces). Otherwise the sorted vertex triples are grouped.
+    """
+    E, h2e = edge_index
+    count = np.bincount(h2e, minlength=len(E))
+    if count.max(initial=0) > 2:
+        labels, first = _group_rows(np.sort(F, axis=1).astype(np.int64))
+        return first[labels] != np.arange(len(F))
+    a, b = edge_half_edges(h2e, len(E))
+    a, b = a[h2e], b[h2e]
+    across = (np.where(a == np.arange(len(h2e)), b, a) // 3).reshape(-1, 3)  # self on a boundary
+    return (
+        (across[:, 0] == across[:, 1])
+        & (across[:, 0] == across[:, 2])
+        & (across[:, 0] < np.arange(len(F)))
+    )
+
+
 def _merge_vertices(V: np.ndarray, tol: float) -> np.ndarray:
     """Representative (lowest input index) of every vertex's merge cluster, (n,) int64."""
     labels, first = _group_rows(V + 0.0)  # + 0.0 turns -0.0 into 0.0
@@ -428,7 +453,7 @@ def _pair_keys(pairs: np.ndarray, m: int) -> np.ndarray:
     return P[:, 0] * (3 * m) + P[:, 1]
 
 
-def _glue_pairs(F: np.ndarray) -> tuple[np.ndarray, int, tuple]:
+def _glue_pairs(F: np.ndarray, edge_index: tuple | None = None) -> tuple[np.ndarray, int, tuple]:
     """Half-edge pairs to glue: along every edge its faces, ordered, are paired (0,1), (2,3)...
 
     On an edge with more than two faces, faces whose other two edges are ordinary interior
@@ -443,9 +468,9 @@ def _glue_pairs(F: np.ndarray) -> tuple[np.ndarray, int, tuple]:
     nonmanifold : int
         Number of edges with more than two faces.
     edge_index : tuple
-        ``edges(F)``.
+        ``edges(F)`` (given, or computed).
     """
-    E, h2e = edges(F)
+    E, h2e = edges(F) if edge_index is None else edge_index
     count = np.bincount(h2e, minlength=len(E))
     regular = (count[h2e] == 2).reshape(-1, 3).sum(axis=1)  # interior edges of each face
     if count.max(initial=0) <= 2:

@@ -464,3 +464,31 @@ def test_cross_is_numpys_cross_bit_for_bit():
     out = np.empty((500, 3))
     assert _cross(a, b, out) is out
     assert out.tobytes() == np.cross(a, b).tobytes()
+
+
+def test_duplicates_from_the_edges_are_the_grouped_triples():
+    """Duplicate faces found through the faces across each edge (edge-manifold faces) or by
+    grouping sorted triples (otherwise) are the later faces of equal sorted triples."""
+    from segparam.clean import _duplicates
+
+    rng = np.random.default_rng(8)
+    seen = set()
+    for t in range(60):
+        V, F = tri_grid(int(rng.integers(2, 8)), int(rng.integers(2, 8)))
+        F = F[rng.random(len(F)) < 0.8]
+        if len(F) == 0:
+            continue
+        k = int(rng.integers(0, 4))
+        extra = F[rng.integers(0, len(F), k)]  # copies, some rotated or reversed
+        extra = np.where((rng.random(k) < 0.5)[:, None], extra[:, ::-1], extra[:, [1, 2, 0]])
+        if t % 3 == 0:  # a third face on an edge: the grouping path
+            extra = np.vstack([extra, [F[0, 0], F[0, 1], len(V) - 1]])
+        F = np.vstack([F, extra])[rng.permutation(len(F) + len(extra))]
+        S = np.sort(F, axis=1)
+        _, first = np.unique(S, axis=0, return_index=True)
+        want = np.ones(len(F), dtype=bool)
+        want[first] = False
+        got = _duplicates(F, mesh.edges(F))
+        np.testing.assert_array_equal(got, want)
+        seen.add((bool(want.any()), bool(mesh.edge_face_counts(F)[1].max() > 2)))
+    assert len(seen) == 4  # with and without duplicates, on both paths
