@@ -410,25 +410,35 @@ def test_negative_tolerance_is_rejected():
 # ---------------------------------------------------------------------------------------------
 
 
-def test_close_pairs_are_the_kd_tree_pairs():
-    """The sweep in front of the k-d tree changes nothing: no pair, some pairs, grid fallback."""
+def test_apart_only_when_the_kd_tree_and_grouping_find_nothing():
+    """The sweep that lets merging skip grouping and the k-d tree never misses a close pair or
+    a duplicate; it does answer True on generic points."""
     from scipy.spatial import cKDTree
 
-    from segparam.clean import _close_pairs
+    from segparam.clean import _apart
 
     rng = np.random.default_rng(4)
     grid = tri_grid(30, 30)[0]
-    for t in range(60):
+    answers = set()
+    for t in range(80):
         P = rng.normal(size=(int(rng.integers(2, 400)), 3)) * 10.0 ** rng.integers(-3, 4)
         if t % 3 == 0:  # near-duplicates, some closer than the tolerance, some just beyond
             k = int(rng.integers(1, len(P) + 1))
             P = np.vstack([P, P[:k] + rng.normal(size=(k, 3)) * 10.0 ** rng.integers(-12, -6)])
+        if t % 4 == 1:  # exact duplicates, -0.0
+            P = np.vstack([P, P[: int(rng.integers(1, len(P) + 1))], -0.0 * P[:1]])
         if t % 5 == 0:
             P = grid + rng.normal(size=grid.shape) * 1e-12 * (t % 2)
-        tol = 1e-9 * float(np.linalg.norm(np.ptp(P, axis=0))) * 10.0 ** rng.integers(0, 4)
-        want = cKDTree(P).query_pairs(tol, output_type="ndarray")
-        got = _close_pairs(P, tol)
-        assert {tuple(p) for p in got.tolist()} == {tuple(p) for p in want.tolist()}
+        P = P + 0.0
+        diag = float(np.linalg.norm(np.ptp(P, axis=0)))
+        tol = 1e-9 * diag * 10.0 ** rng.integers(0, 4) * (t % 7 != 0)  # and 0
+        close = len(cKDTree(P).query_pairs(tol)) > 0 if tol > 0 else False
+        equal = len(np.unique(P, axis=0)) < len(P)
+        apart = _apart(P, tol)
+        assert not (apart and (close or equal))
+        answers.add((apart, close or equal))
+    assert answers == {(True, False), (False, True), (False, False)}
+    assert not _apart(np.array([[0.0, 0, 0], [1e-170, 0, 0], [1, 1, 1]]), 1e-160)
 
 
 def test_glue_pairs_without_sort_are_the_sorted_pairs():
