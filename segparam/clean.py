@@ -221,12 +221,12 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
     reason[zero] = _REASONS.index(REASON_ZERO_AREA)
     alive = np.flatnonzero(~(repeated | zero))
     Fm = Fm[alive]
-    edge_index = edges(Fm)  # serves step 4 too: removing duplicates empties no edge
-    dup = _duplicates(Fm, edge_index)
+    table = _edge_table(edges(Fm))  # serves step 4 too: removing duplicates empties no edge
+    dup = _duplicates(Fm, table)
     if dup.any():
         reason[alive[dup]] = _REASONS.index(REASON_DUPLICATE)
         alive, Fm = alive[~dup], Fm[~dup]
-        edge_index = (edge_index[0], edge_index[1].reshape(-1, 3)[~dup].ravel())
+        table = _edge_table((table[0], table[1].reshape(-1, 3)[~dup].ravel()))
     if len(alive) == 0:
         codes, counts = np.unique(reason, return_counts=True)
         what = ", ".join(f"{c} {_REASONS[r]}" for r, c in zip(codes, counts, strict=True))
@@ -234,11 +234,11 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
 
     # 4. + 5. split, orient, cut non-orientable components
     fidx = alive
-    glue, split_edges, glue_edges = _glue_pairs(Fm, edge_index)
+    glue, split_edges, glue_table = _glue_pairs(Fm, table)
     cut = 0
     while True:
-        Fs, vsrc, glue, h2e, count = _split(Fm, glue, glue_edges)
-        parity, comp, ncomp, conflicts = _parity(Fs, h2e, count)
+        Fs, vsrc, glue, table = _split(Fm, glue, glue_table)
+        parity, comp, ncomp, conflicts = _parity(Fs, table)
         if len(conflicts) == 0:
             break
         key_c = _pair_keys(conflicts, len(Fm))
@@ -262,10 +262,11 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
         glue = glue[keep[gf].all(axis=1)]
         glue = newpos[glue // 3] * 3 + glue % 3
         Fm, fidx = Fm[keep], fidx[keep]
-        glue_edges = None  # the edges of the faces before this drop
+        glue_table = None  # the edges of the faces before this drop
         logger.debug("clean: removed %d faces that keep a surface non-orientable", len(drop))
 
     Vout = V[vsrc]
+    _, h2e, count = table[:3]
     parity = _orient_components(Vout, Fs, count[h2e], parity, comp, ncomp, area[fidx])
     Fo = np.where(parity[:, None], Fs[:, [0, 2, 1]], Fs)
 
@@ -358,21 +359,41 @@ def _group_rows(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return labels, first
 
 
-def _duplicates(F: np.ndarray, edge_index: tuple) -> np.ndarray:
-    """Faces with the same three vertices as an earlier face (either winding), (m,) bool.
+def _edge_table(edge_index: tuple) -> tuple:
+    """``edges(F)`` with what the steps below read off it, computed once for all of them.
 
-    ``edge_index`` is ``edges(F)``. Where no edge has more than two faces, two faces with the
-    same vertices are the only faces of all three of their edges, so a face is a duplicate when
-    the face across each of its half-edges is one and the same earlier face: no sort of the
-    faces (0.23 -> 0.14 s at 1M faces). Otherwise the sorted vertex triples are grouped.
+    Returns
+    -------
+    E, h2e
+        ``edge_index``.
+    count : (e,) int64 ndarray
+        Faces of every edge, ``np.bincount(h2e)``.
+    first, last : (e,) int64 ndarray or None
+        The first and last half-edge of every edge (:func:`segparam.mesh.edge_half_edges`), where
+        no edge has more than two faces (they are then its two), else None. Three steps read
+        them at 1M faces: 0.05-0.11 s each time.
     """
     E, h2e = edge_index
     count = np.bincount(h2e, minlength=len(E))
     if count.max(initial=0) > 2:
+        return E, h2e, count, None, None
+    return (E, h2e, count, *edge_half_edges(h2e, len(E)))
+
+
+def _duplicates(F: np.ndarray, table: tuple) -> np.ndarray:
+    """Faces with the same three vertices as an earlier face (either winding), (m,) bool.
+
+    ``table`` is :func:`_edge_table` of ``F``. Where no edge has more than two faces, two faces
+    with the same vertices are the only faces of all three of their edges, so a face is a
+    duplicate when the face across each of its half-edges is one and the same earlier face: no
+    sort of the faces (0.23 -> 0.14 s at 1M faces). Otherwise the sorted vertex triples are
+    grouped.
+    """
+    _, h2e, _, first, last = table
+    if first is None:
         labels, first = _group_rows(np.sort(F, axis=1).astype(np.int64))
         return first[labels] != np.arange(len(F))
-    a, b = edge_half_edges(h2e, len(E))
-    a, b = a[h2e], b[h2e]
+    a, b = first[h2e], last[h2e]
     across = (np.where(a == np.arange(len(h2e)), b, a) // 3).reshape(-1, 3)  # self on a boundary
     return (
         (across[:, 0] == across[:, 1])
@@ -451,7 +472,7 @@ def _pair_keys(pairs: np.ndarray, m: int) -> np.ndarray:
     return P[:, 0] * (3 * m) + P[:, 1]
 
 
-def _glue_pairs(F: np.ndarray, edge_index: tuple | None = None) -> tuple[np.ndarray, int, tuple]:
+def _glue_pairs(F: np.ndarray, table: tuple | None = None) -> tuple[np.ndarray, int, tuple]:
     """Half-edge pairs to glue: along every edge its faces, ordered, are paired (0,1), (2,3)...
 
     On an edge with more than two faces, faces whose other two edges are ordinary interior
@@ -465,21 +486,21 @@ def _glue_pairs(F: np.ndarray, edge_index: tuple | None = None) -> tuple[np.ndar
         Half-edge indices ``3 f + k``.
     nonmanifold : int
         Number of edges with more than two faces.
-    edge_index : tuple
-        ``edges(F)`` (given, or computed).
+    table : tuple
+        :func:`_edge_table` of ``F`` (given, or computed).
     """
-    E, h2e = edges(F) if edge_index is None else edge_index
-    count = np.bincount(h2e, minlength=len(E))
+    if table is None:
+        table = _edge_table(edges(F))
+    _, h2e, count, first, last = table
     regular = (count[h2e] == 2).reshape(-1, 3).sum(axis=1)  # interior edges of each face
-    if count.max(initial=0) <= 2:
+    if first is not None:
         # Every edge has its first and last half-edge: the same pairs without the sort of all
         # half-edges (0.32 s at 1M faces), the face with more interior edges first.
-        first, last = edge_half_edges(h2e, len(E))
         two = np.flatnonzero(count == 2)
         a, b = first[two], last[two]
         swap = regular[b // 3] > regular[a // 3]
         glue = np.stack([np.where(swap, b, a), np.where(swap, a, b)], axis=1)
-        return glue, 0, (E, h2e)
+        return glue, 0, table
     h = np.arange(len(h2e))
     order = np.lexsort((h, -regular[h // 3], h2e))
     hs = h2e[order]
@@ -487,7 +508,7 @@ def _glue_pairs(F: np.ndarray, edge_index: tuple | None = None) -> tuple[np.ndar
     pos = h - start[hs]
     i = np.flatnonzero((pos % 2 == 0) & (pos + 1 < count[hs]))
     glue = np.stack([order[i], order[i + 1]], axis=1)
-    return glue, int(np.count_nonzero(count > 2)), (E, h2e)
+    return glue, int(np.count_nonzero(count > 2)), table
 
 
 def _split_corners(F: np.ndarray, glue: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -523,8 +544,8 @@ def _split_corners(F: np.ndarray, glue: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 
 def _split(
-    F: np.ndarray, glue: np.ndarray, edge_index: tuple | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    F: np.ndarray, glue: np.ndarray, table: tuple | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
     """Split into fans; where an edge still has more than two faces, cut its extra faces free.
 
     An extra face (not in the edge's glued pair) can end up on the same two vertex copies
@@ -532,8 +553,8 @@ def _split(
     extra faces' other edge at the edge's first endpoint separates them there. One pass suffices
     in theory; the loop is a guard.
 
-    ``edge_index`` is ``edges(F)``, if known: it serves ``Fs`` as well when nothing was split
-    (``Fs`` is then ``F``: 0.46 of 0.89 s at 1M faces went to computing it again).
+    ``table`` is :func:`_edge_table` of ``F``, if known: it serves ``Fs`` as well when nothing
+    was split (``Fs`` is then ``F``: 0.46 of 0.89 s at 1M faces went to computing it again).
 
     Returns
     -------
@@ -541,19 +562,17 @@ def _split(
         As :func:`_split_corners`.
     glue : (g', 2) int64 ndarray
         The glue pairs that remain.
-    h2e : (3 m,) int64 ndarray
-        Edge of every half-edge of ``Fs`` (:func:`segparam.mesh.edges`).
-    count : (e,) int64 ndarray
-        Faces of every edge, ``np.bincount(h2e)``.
+    table : tuple
+        :func:`_edge_table` of ``Fs``.
     """
     while True:
         Fs, src = _split_corners(F, glue)
-        same = edge_index is not None and np.array_equal(Fs, F)
-        E, h2e = edge_index if same else edges(Fs)
-        count = np.bincount(h2e, minlength=len(E))
+        same = table is not None and np.array_equal(Fs, F)
+        split_table = table if same else _edge_table(edges(Fs))
+        E, h2e, count = split_table[:3]
         hbad = np.flatnonzero(count[h2e] > 2)
         if len(hbad) == 0:
-            return Fs, src, glue, h2e, count
+            return Fs, src, glue, split_table
         # On each bad edge keep one glued pair (the one glued first), free the others.
         partner = np.full(3 * len(F), -1, dtype=np.int64)
         partner[glue[:, 0]], partner[glue[:, 1]] = glue[:, 1], glue[:, 0]
@@ -571,13 +590,11 @@ def _split(
         logger.debug("clean: %d edges still non-manifold after splitting", len(np.unique(e)))
         if not drop.any():  # cannot happen by construction; do not loop forever
             logger.warning("clean: could not split %d non-manifold edges", len(np.unique(e)))
-            return Fs, src, glue, h2e, count
+            return Fs, src, glue, split_table
         glue = glue[~drop]
 
 
-def _parity(
-    Fs: np.ndarray, h2e: np.ndarray, count: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
+def _parity(Fs: np.ndarray, table: tuple) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
     """Relative orientation of every face from a BFS spanning tree of the face graph.
 
     Two faces on an edge agree when they traverse it in opposite directions. The parity of a
@@ -598,8 +615,8 @@ def _parity(
     """
     m = len(Fs)
     flat = Fs.ravel()
-    if count.max(initial=0) <= 2:  # as _split leaves it: the first and last half-edge, no sort
-        first, last = edge_half_edges(h2e, len(count))
+    _, h2e, count, first, last = table
+    if first is not None:  # as _split leaves it: the first and last half-edge, no sort
         two = np.flatnonzero(count == 2)
         ha, hb = first[two], last[two]
     else:

@@ -479,7 +479,7 @@ def test_cross_is_numpys_cross_bit_for_bit():
 def test_duplicates_from_the_edges_are_the_grouped_triples():
     """Duplicate faces found through the faces across each edge (edge-manifold faces) or by
     grouping sorted triples (otherwise) are the later faces of equal sorted triples."""
-    from segparam.clean import _duplicates
+    from segparam.clean import _duplicates, _edge_table
 
     rng = np.random.default_rng(8)
     seen = set()
@@ -498,7 +498,7 @@ def test_duplicates_from_the_edges_are_the_grouped_triples():
         _, first = np.unique(S, axis=0, return_index=True)
         want = np.ones(len(F), dtype=bool)
         want[first] = False
-        got = _duplicates(F, mesh.edges(F))
+        got = _duplicates(F, _edge_table(mesh.edges(F)))
         np.testing.assert_array_equal(got, want)
         seen.add((bool(want.any()), bool(mesh.edge_face_counts(F)[1].max() > 2)))
     assert len(seen) == 4  # with and without duplicates, on both paths
