@@ -210,7 +210,7 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
     # 1. merge vertices
     rep = _merge_vertices(V, merge_tolerance * diag)
     merged = n - int(np.count_nonzero(np.bincount(rep, minlength=n)))
-    Fm = rep[F]
+    Fm = rep[F] if merged else F  # nothing merged: rep is the identity (F is only read)
 
     # 2. degenerate faces; 3. duplicate faces
     reason = np.zeros(m, dtype=np.int8)  # index into _REASONS; 0: kept
@@ -220,7 +220,7 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
     zero = ~repeated & (area <= area_tol * diag**2)
     reason[zero] = _REASONS.index(REASON_ZERO_AREA)
     alive = np.flatnonzero(~(repeated | zero))
-    Fm = Fm[alive]
+    Fm = Fm[alive] if len(alive) < m else Fm
     table = _edge_table(edges(Fm))  # serves step 4 too: removing duplicates empties no edge
     dup = _duplicates(Fm, table)
     if dup.any():
@@ -267,7 +267,9 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
 
     Vout = V[vsrc]
     _, h2e, count = table[:3]
-    parity = _orient_components(Vout, Fs, count[h2e], parity, comp, ncomp, area[fidx])
+    parity = _orient_components(
+        Vout, Fs, count[h2e], parity, comp, ncomp, area[fidx] if len(fidx) < m else area
+    )
     Fo = _flip(Fs, parity)
 
     removed = np.flatnonzero(reason)
