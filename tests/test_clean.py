@@ -502,3 +502,46 @@ def test_duplicates_from_the_edges_are_the_grouped_triples():
         np.testing.assert_array_equal(got, want)
         seen.add((bool(want.any()), bool(mesh.edge_face_counts(F)[1].max() > 2)))
     assert len(seen) == 4  # with and without duplicates, on both paths
+
+
+def test_split_corners_graph_as_csr_gives_the_same_fans():
+    """Consistently oriented faces build the corner graph as CSR directly; the fans are those of
+    the graph of glued pairs (pinched vertices included)."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    from segparam.clean import _glue_pairs, _split_corners
+
+    def reference(F, glue):
+        m, flat = len(F), F.ravel()
+        ha, hb = glue[:, 0], glue[:, 1]
+        na, nb = ha - ha % 3 + (ha % 3 + 1) % 3, hb - hb % 3 + (hb % 3 + 1) % 3
+        rows, cols = np.concatenate([ha, na]), np.concatenate([nb, hb])
+        G = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * m, 3 * m))
+        k, lab = connected_components(G, directed=False)
+        first = np.full(k, 3 * m)
+        np.minimum.at(first, lab, np.arange(3 * m))
+        src = flat[first]
+        o = np.lexsort((first, src))
+        primary = np.ones(k, dtype=bool)
+        primary[1:] = src[o][1:] != src[o][:-1]
+        final = np.concatenate([o[primary], o[~primary]])
+        newid = np.empty(k, dtype=np.int64)
+        newid[final] = np.arange(k)
+        return newid[lab].reshape(m, 3), src[final]
+
+    rng = np.random.default_rng(9)
+    pinched = 0
+    for _ in range(30):
+        V, F = tri_grid(int(rng.integers(3, 8)), int(rng.integers(3, 8)))
+        F = F[rng.random(len(F)) < 0.75]  # holes: vertices where two fans touch
+        if len(F) == 0:
+            continue
+        F = F[rng.permutation(len(F))]
+        glue, _, _ = _glue_pairs(F)
+        Fs, src = _split_corners(F, glue)
+        want_F, want_src = reference(F, glue)
+        np.testing.assert_array_equal(Fs, want_F)
+        np.testing.assert_array_equal(src, want_src)
+        pinched += len(src) > len(np.unique(F))
+    assert pinched > 0
