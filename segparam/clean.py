@@ -221,7 +221,9 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
     reason[zero] = _REASONS.index(REASON_ZERO_AREA)
     alive = np.flatnonzero(~(repeated | zero))
     Fm = Fm[alive] if len(alive) < m else Fm
-    table = _edge_table(edges(Fm))  # serves step 4 too: removing duplicates empties no edge
+    table = _edge_table(
+        edges(Fm, ends=True)
+    )  # serves step 4 too: removing duplicates empties no edge
     dup = _duplicates(Fm, table)
     if dup.any():
         reason[alive[dup]] = _REASONS.index(REASON_DUPLICATE)
@@ -370,10 +372,12 @@ def _group_rows(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _edge_table(edge_index: tuple) -> tuple:
     """``edges(F)`` with what the steps below read off it, computed once for all of them.
 
+    ``edge_index`` is ``edges(F)``, or ``edges(F, ends=True)`` which has the rest already.
+
     Returns
     -------
     E, h2e
-        ``edge_index``.
+        ``edge_index[:2]``.
     count : (e,) int64 ndarray
         Faces of every edge, ``np.bincount(h2e)``.
     first, last : (e,) int64 ndarray or None
@@ -381,11 +385,17 @@ def _edge_table(edge_index: tuple) -> tuple:
         no edge has more than two faces (they are then its two), else None. Three steps read
         them at 1M faces: 0.05-0.11 s each time.
     """
-    E, h2e = edge_index
-    count = np.bincount(h2e, minlength=len(E))
+    if len(edge_index) == 5:
+        E, h2e, count, first, last = edge_index
+    else:
+        E, h2e = edge_index
+        count = np.bincount(h2e, minlength=len(E))
+        first = last = None
     if count.max(initial=0) > 2:
         return E, h2e, count, None, None
-    return (E, h2e, count, *edge_half_edges(h2e, len(E)))
+    if first is None:
+        first, last = edge_half_edges(h2e, len(E))
+    return E, h2e, count, first, last
 
 
 def _duplicates(F: np.ndarray, table: tuple) -> np.ndarray:
@@ -498,7 +508,7 @@ def _glue_pairs(F: np.ndarray, table: tuple | None = None) -> tuple[np.ndarray, 
         :func:`_edge_table` of ``F`` (given, or computed).
     """
     if table is None:
-        table = _edge_table(edges(F))
+        table = _edge_table(edges(F, ends=True))
     _, h2e, count, first, last = table
     regular = (count[h2e] == 2).reshape(-1, 3).sum(axis=1)  # interior edges of each face
     if first is not None:
@@ -587,7 +597,7 @@ def _split(
     while True:
         Fs, src = _split_corners(F, glue)
         same = table is not None and np.array_equal(Fs, F)
-        split_table = table if same else _edge_table(edges(Fs))
+        split_table = table if same else _edge_table(edges(Fs, ends=True))
         E, h2e, count = split_table[:3]
         hbad = np.flatnonzero(count[h2e] > 2)
         if len(hbad) == 0:

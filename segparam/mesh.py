@@ -363,8 +363,12 @@ def _half_edges(F: np.ndarray) -> np.ndarray:
     return np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
 
 
-def edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def edges(F: np.ndarray, *, ends: bool = False) -> tuple[np.ndarray, ...]:
     """Unique undirected edges and the edge of every half-edge.
+
+    ``ends=True`` also returns what the sort already knows: each edge's number of half-edges
+    (``np.bincount(half_to_edge)``) and its first and last half-edge (:func:`edge_half_edges`),
+    (``_edge_table`` in :mod:`segparam.clean`: 0.355 -> 0.31 s at 1M faces).
 
     Returns
     -------
@@ -372,6 +376,8 @@ def edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         Sorted vertex pairs, ``E[:, 0] < E[:, 1]``.
     half_to_edge : (3 m,) int64 ndarray
         Edge index of half-edge ``3 f + k`` (from ``F[f, k]`` to ``F[f, (k + 1) % 3]``).
+    count, first, last : (e,) int64 ndarrays
+        Only with ``ends=True``.
     """
     F = np.asarray(F)
     # half-edge 3 f + k: F[f, k] -> F[f, k + 1]; keys overflow int32. Temporaries are reused
@@ -395,10 +401,15 @@ def edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     rank -= 1
     inverse = np.empty(len(sk), dtype=np.int64)
     inverse[order] = rank
-    del order, rank
+    del rank
+    extra = ()
+    if ends:
+        bounds = np.append(np.flatnonzero(new), len(sk))  # the stable sort keeps half-edge order
+        extra = (np.diff(bounds), order[bounds[:-1]], order[bounds[1:] - 1])
+    del order
     keys = sk[new]
     E = np.stack([keys // n, keys % n], axis=1)
-    return E, inverse
+    return (E, inverse, *extra)
 
 
 def edge_half_edges(h2e: np.ndarray, n_edges: int) -> tuple[np.ndarray, np.ndarray]:
