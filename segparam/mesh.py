@@ -169,7 +169,7 @@ def _face_cross(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     for k in range(3):
         u[k] -= x[k]
         w[k] -= x[k]
-    out = np.empty((len(Ft[0]), 3))
+    out = np.empty((len(Ft[0]), 3), dtype=u[0].dtype)  # the dtype np.cross would give
     tmp = x[0]  # spent
     for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
         np.multiply(u[j], w[k], out=out[:, i])
@@ -368,7 +368,8 @@ def edges(F: np.ndarray, *, ends: bool = False) -> tuple[np.ndarray, ...]:
 
     ``ends=True`` also returns what the sort already knows: each edge's number of half-edges
     (``np.bincount(half_to_edge)``) and its first and last half-edge (:func:`edge_half_edges`),
-    (``_edge_table`` in :mod:`segparam.clean`: 0.355 -> 0.31 s at 1M faces).
+    without computing them again (the edge table of :mod:`segparam.clean`: 0.355 -> 0.31 s at
+    1M faces).
 
     Returns
     -------
