@@ -210,19 +210,24 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
     # 1. merge vertices
     rep = _merge_vertices(V, merge_tolerance * diag)
     merged = n - int(np.count_nonzero(np.bincount(rep, minlength=n)))
-    Fm = rep[F]
+    Fm = rep[F] if merged else F  # nothing merged: rep is the identity (F is only read)
 
     # 2. degenerate faces; 3. duplicate faces
     reason = np.zeros(m, dtype=np.int8)  # index into _REASONS; 0: kept
     repeated = (Fm[:, 0] == Fm[:, 1]) | (Fm[:, 1] == Fm[:, 2]) | (Fm[:, 0] == Fm[:, 2])
     reason[repeated] = _REASONS.index(REASON_REPEATED)
-    zero = ~repeated & (face_areas(V, Fm) <= area_tol * diag**2)
+    area = face_areas(V, Fm)  # the output faces' areas too (step 5): same corners, same bits
+    zero = ~repeated & (area <= area_tol * diag**2)
     reason[zero] = _REASONS.index(REASON_ZERO_AREA)
     alive = np.flatnonzero(~(repeated | zero))
-    labels, first = _group_rows(np.sort(Fm[alive], axis=1).astype(np.int64))
-    dup = alive[first[labels] != np.arange(len(alive))]
-    reason[dup] = _REASONS.index(REASON_DUPLICATE)
-    alive = alive[first[labels] == np.arange(len(alive))]
+    Fm = Fm[alive] if len(alive) < m else Fm
+    # The edges serve step 4 too: removing duplicates empties no edge.
+    table = _edge_table(edges(Fm, ends=True))
+    dup = _duplicates(Fm, table)
+    if dup.any():
+        reason[alive[dup]] = _REASONS.index(REASON_DUPLICATE)
+        alive, Fm = alive[~dup], Fm[~dup]
+        table = _edge_table((table[0], table[1].reshape(-1, 3)[~dup].ravel()))
     if len(alive) == 0:
         codes, counts = np.unique(reason, return_counts=True)
         what = ", ".join(f"{c} {_REASONS[r]}" for r, c in zip(codes, counts, strict=True))
@@ -230,12 +235,11 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
 
     # 4. + 5. split, orient, cut non-orientable components
     fidx = alive
-    Fm = Fm[alive]
-    glue, split_edges, glue_edges = _glue_pairs(Fm)
+    glue, split_edges, glue_table = _glue_pairs(Fm, table)
     cut = 0
     while True:
-        Fs, vsrc, glue, h2e = _split(Fm, glue, glue_edges)
-        parity, comp, ncomp, conflicts = _parity(Fs, h2e)
+        Fs, vsrc, glue, table = _split(Fm, glue, glue_table)
+        parity, comp, ncomp, conflicts = _parity(Fs, table)
         if len(conflicts) == 0:
             break
         key_c = _pair_keys(conflicts, len(Fm))
@@ -259,21 +263,24 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
         glue = glue[keep[gf].all(axis=1)]
         glue = newpos[glue // 3] * 3 + glue % 3
         Fm, fidx = Fm[keep], fidx[keep]
-        glue_edges = None  # the edges of the faces before this drop
+        glue_table = None  # the edges of the faces before this drop
         logger.debug("clean: removed %d faces that keep a surface non-orientable", len(drop))
 
     Vout = V[vsrc]
-    parity = _orient_components(Vout, Fs, h2e, parity, comp, ncomp)
-    Fo = np.where(parity[:, None], Fs[:, [0, 2, 1]], Fs)
+    _, h2e, count = table[:3]
+    parity = _orient_components(
+        Vout, Fs, count[h2e], parity, comp, ncomp, area[fidx] if len(fidx) < m else area
+    )
+    Fo = _flip(Fs, parity)
 
     removed = np.flatnonzero(reason)
     n_sources = int(np.count_nonzero(np.bincount(vsrc, minlength=n)))
     result = CleanResult(
         V=_frozen(Vout),
-        F=_frozen(Fo.astype(np.int64)),
-        face_index=_frozen(fidx.astype(np.int64)),
-        vertex_index=_frozen(vsrc.astype(np.int64)),
-        removed_faces=_frozen(removed.astype(np.int64)),
+        F=_frozen(Fo.astype(np.int64, copy=False)),  # all arrays of its own: no copies
+        face_index=_frozen(fidx.astype(np.int64, copy=False)),
+        vertex_index=_frozen(vsrc.astype(np.int64, copy=False)),
+        removed_faces=_frozen(removed.astype(np.int64, copy=False)),
         removed_reasons=_frozen(np.array(_REASONS)[reason[removed]]),
         input_vertices=n,
         input_faces=m,
@@ -302,6 +309,12 @@ def _clean(V: np.ndarray, F: np.ndarray, merge_tolerance: float, area_tol: float
         ncomp,
     )
     return result
+
+
+def _flip(F: np.ndarray, flip: np.ndarray) -> np.ndarray:
+    """``F`` with the winding of the rows where ``flip`` is True reversed (corners 1 and 2
+    swapped); ``F`` itself when none is (a gather and a copy of all faces saved)."""
+    return np.where(flip[:, None], F[:, [0, 2, 1]], F) if flip.any() else F
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -355,9 +368,63 @@ def _group_rows(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return labels, first
 
 
+def _edge_table(edge_index: tuple) -> tuple:
+    """``edges(F)`` with what the steps below read off it, computed once for all of them.
+
+    ``edge_index`` is ``edges(F)``, or ``edges(F, ends=True)`` which has the rest already.
+
+    Returns
+    -------
+    E, h2e
+        ``edge_index[:2]``.
+    count : (e,) int64 ndarray
+        Faces of every edge, ``np.bincount(h2e)``.
+    first, last : (e,) int64 ndarray or None
+        The first and last half-edge of every edge (:func:`segparam.mesh.edge_half_edges`), where
+        no edge has more than two faces (they are then its two), else None. Three steps read
+        them; each computed them again before (0.05-0.11 s each time at 1M faces).
+    """
+    if len(edge_index) == 5:
+        E, h2e, count, first, last = edge_index
+    else:
+        E, h2e = edge_index
+        count = np.bincount(h2e, minlength=len(E))
+        first = last = None
+    if count.max(initial=0) > 2:
+        return E, h2e, count, None, None
+    if first is None:
+        first, last = edge_half_edges(h2e, len(E))
+    return E, h2e, count, first, last
+
+
+def _duplicates(F: np.ndarray, table: tuple) -> np.ndarray:
+    """Faces with the same three vertices as an earlier face (either winding), (m,) bool.
+
+    ``table`` is :func:`_edge_table` of ``F``. Where no edge has more than two faces, two faces
+    with the same vertices are the only faces of all three of their edges, so a face is a
+    duplicate when the face across each of its half-edges is one and the same earlier face: no
+    sort of the faces (0.23 -> 0.14 s at 1M faces). Otherwise the sorted vertex triples are
+    grouped.
+    """
+    _, h2e, _, first, last = table
+    if first is None:
+        labels, first = _group_rows(np.sort(F, axis=1).astype(np.int64))
+        return first[labels] != np.arange(len(F))
+    a, b = first[h2e], last[h2e]
+    across = (np.where(a == np.arange(len(h2e)), b, a) // 3).reshape(-1, 3)  # self on a boundary
+    return (
+        (across[:, 0] == across[:, 1])
+        & (across[:, 0] == across[:, 2])
+        & (across[:, 0] < np.arange(len(F)))
+    )
+
+
 def _merge_vertices(V: np.ndarray, tol: float) -> np.ndarray:
     """Representative (lowest input index) of every vertex's merge cluster, (n,) int64."""
-    labels, first = _group_rows(V + 0.0)  # + 0.0 turns -0.0 into 0.0
+    P = V + 0.0  # turns -0.0 into 0.0
+    if _apart(P, tol):  # nothing to merge: no grouping, no tree (0.70 -> 0.12 s at 500k)
+        return np.arange(len(V), dtype=np.int64)
+    labels, first = _group_rows(P)
     if tol > 0 and len(first) > 1:
         # Exact duplicates are already one point, so the tree sees only distinct positions.
         pairs = cKDTree(V[first]).query_pairs(tol, output_type="ndarray")
@@ -369,6 +436,42 @@ def _merge_vertices(V: np.ndarray, tol: float) -> np.ndarray:
             np.minimum.at(lowest, cluster, first)
             return lowest[cluster[labels]]
     return first[labels]
+
+
+# Slab half-width of the sweep in _apart, in merge tolerances: a pair within the tolerance is
+# within it along every axis; twice as wide leaves room for rounding.
+_SWEEP_SLACK = 2.0
+# Candidate pairs of the sweep per point above which _apart gives up: a grid has rows of equal
+# coordinates along every axis (1 000 x 1 000 grid: 5e8 pairs); 1,573 pairs for the 500k points
+# of the 1M-face brain.
+_SWEEP_MAX_PAIRS = 4
+
+
+def _apart(P: np.ndarray, tol: float) -> bool:
+    """True if no two points are equal or within ``tol`` of each other, as far as a sweep shows.
+
+    The sweep lists the pairs within ``2 tol`` along the longest axis (one sort), then keeps
+    those within ``2 tol`` along the other two: none left means that neither grouping equal rows
+    nor ``cKDTree.query_pairs(tol)`` would find anything (with ``tol`` 0, only equal points
+    are left). False means "maybe": many candidates, or a tolerance whose square underflows (the
+    tree's squared distances then round to 0 up to 1e-162).
+    """
+    n = len(P)
+    width = _SWEEP_SLACK * tol
+    if tol > 0 and tol * tol < np.finfo(np.float64).tiny:
+        return False
+    axes = np.argsort(-np.ptp(P, axis=0), kind="stable")
+    x = P[:, axes[0]]
+    order = np.argsort(x, kind="stable")
+    xs = x[order]
+    count = np.searchsorted(xs, xs + width, side="right") - np.arange(1, n + 1)
+    total = int(count.sum())
+    if total > _SWEEP_MAX_PAIRS * n:
+        return False
+    i = np.repeat(np.arange(n), count)
+    j = i + 1 + np.arange(total) - np.repeat(np.cumsum(count) - count, count)
+    d = np.abs(P[order[i]][:, axes[1:]] - P[order[j]][:, axes[1:]])
+    return not np.any(d.max(axis=1, initial=0.0) <= width)
 
 
 def _next(h: np.ndarray) -> np.ndarray:
@@ -386,7 +489,7 @@ def _pair_keys(pairs: np.ndarray, m: int) -> np.ndarray:
     return P[:, 0] * (3 * m) + P[:, 1]
 
 
-def _glue_pairs(F: np.ndarray) -> tuple[np.ndarray, int, tuple]:
+def _glue_pairs(F: np.ndarray, table: tuple | None = None) -> tuple[np.ndarray, int, tuple]:
     """Half-edge pairs to glue: along every edge its faces, ordered, are paired (0,1), (2,3)...
 
     On an edge with more than two faces, faces whose other two edges are ordinary interior
@@ -400,12 +503,21 @@ def _glue_pairs(F: np.ndarray) -> tuple[np.ndarray, int, tuple]:
         Half-edge indices ``3 f + k``.
     nonmanifold : int
         Number of edges with more than two faces.
-    edge_index : tuple
-        ``edges(F)``.
+    table : tuple
+        :func:`_edge_table` of ``F`` (given, or computed).
     """
-    E, h2e = edges(F)
-    count = np.bincount(h2e, minlength=len(E))
+    if table is None:
+        table = _edge_table(edges(F, ends=True))
+    _, h2e, count, first, last = table
     regular = (count[h2e] == 2).reshape(-1, 3).sum(axis=1)  # interior edges of each face
+    if first is not None:
+        # Every edge has its first and last half-edge: the same pairs without the sort of all
+        # half-edges (0.32 s at 1M faces), the face with more interior edges first.
+        two = np.flatnonzero(count == 2)
+        a, b = first[two], last[two]
+        swap = regular[b // 3] > regular[a // 3]
+        glue = np.stack([np.where(swap, b, a), np.where(swap, a, b)], axis=1)
+        return glue, 0, table
     h = np.arange(len(h2e))
     order = np.lexsort((h, -regular[h // 3], h2e))
     hs = h2e[order]
@@ -413,7 +525,7 @@ def _glue_pairs(F: np.ndarray) -> tuple[np.ndarray, int, tuple]:
     pos = h - start[hs]
     i = np.flatnonzero((pos % 2 == 0) & (pos + 1 < count[hs]))
     glue = np.stack([order[i], order[i + 1]], axis=1)
-    return glue, int(np.count_nonzero(count > 2)), (E, h2e)
+    return glue, int(np.count_nonzero(count > 2)), table
 
 
 def _split_corners(F: np.ndarray, glue: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -432,9 +544,20 @@ def _split_corners(F: np.ndarray, glue: np.ndarray) -> tuple[np.ndarray, np.ndar
     ha, hb = glue[:, 0], glue[:, 1]
     na, nb = _next(ha), _next(hb)
     same = flat[ha] == flat[hb]
-    rows = np.concatenate([ha, na])
-    cols = np.concatenate([np.where(same, hb, nb), np.where(same, nb, hb)])
-    G = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * m, 3 * m))
+    if not same.any() and 3 * m < 2**31:
+        # Every glued edge is run both ways: corner c's fan goes on at the next corner of the
+        # face across c's edge, one neighbour per corner (itself where c's edge is not glued).
+        # So the graph is CSR as it stands, one entry per row: no conversion from pairs
+        # (_split_corners 0.30 -> 0.24 s at 1M faces, the same components).
+        nbr = np.arange(3 * m, dtype=np.int32)
+        nbr[ha], nbr[hb] = nb, na
+        G = sp.csr_matrix(
+            (np.ones(3 * m), nbr, np.arange(3 * m + 1, dtype=np.int32)), shape=(3 * m, 3 * m)
+        )
+    else:
+        rows = np.concatenate([ha, na])
+        cols = np.concatenate([np.where(same, hb, nb), np.where(same, nb, hb)])
+        G = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * m, 3 * m))
     k, lab = _cc(G, directed=False)
     first = np.full(k, 3 * m, dtype=np.int64)
     np.minimum.at(first, lab, np.arange(3 * m))
@@ -449,8 +572,8 @@ def _split_corners(F: np.ndarray, glue: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 
 def _split(
-    F: np.ndarray, glue: np.ndarray, edge_index: tuple | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    F: np.ndarray, glue: np.ndarray, table: tuple | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
     """Split into fans; where an edge still has more than two faces, cut its extra faces free.
 
     An extra face (not in the edge's glued pair) can end up on the same two vertex copies
@@ -458,8 +581,8 @@ def _split(
     extra faces' other edge at the edge's first endpoint separates them there. One pass suffices
     in theory; the loop is a guard.
 
-    ``edge_index`` is ``edges(F)``, if known: it serves ``Fs`` as well when nothing was split
-    (``Fs`` is then ``F``: 0.46 of 0.89 s at 1M faces went to computing it again).
+    ``table`` is :func:`_edge_table` of ``F``, if known: it serves ``Fs`` as well when nothing
+    was split (``Fs`` is then ``F``: 0.46 of 0.89 s at 1M faces went to computing it again).
 
     Returns
     -------
@@ -467,17 +590,17 @@ def _split(
         As :func:`_split_corners`.
     glue : (g', 2) int64 ndarray
         The glue pairs that remain.
-    h2e : (3 m,) int64 ndarray
-        Edge of every half-edge of ``Fs`` (:func:`segparam.mesh.edges`).
+    table : tuple
+        :func:`_edge_table` of ``Fs``.
     """
     while True:
         Fs, src = _split_corners(F, glue)
-        same = edge_index is not None and np.array_equal(Fs, F)
-        E, h2e = edge_index if same else edges(Fs)
-        count = np.bincount(h2e, minlength=len(E))
+        same = table is not None and np.array_equal(Fs, F)
+        split_table = table if same else _edge_table(edges(Fs, ends=True))
+        E, h2e, count = split_table[:3]
         hbad = np.flatnonzero(count[h2e] > 2)
         if len(hbad) == 0:
-            return Fs, src, glue, h2e
+            return Fs, src, glue, split_table
         # On each bad edge keep one glued pair (the one glued first), free the others.
         partner = np.full(3 * len(F), -1, dtype=np.int64)
         partner[glue[:, 0]], partner[glue[:, 1]] = glue[:, 1], glue[:, 0]
@@ -495,17 +618,18 @@ def _split(
         logger.debug("clean: %d edges still non-manifold after splitting", len(np.unique(e)))
         if not drop.any():  # cannot happen by construction; do not loop forever
             logger.warning("clean: could not split %d non-manifold edges", len(np.unique(e)))
-            return Fs, src, glue, h2e
+            return Fs, src, glue, split_table
         glue = glue[~drop]
 
 
-def _parity(Fs: np.ndarray, h2e: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
+def _parity(Fs: np.ndarray, table: tuple) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
     """Relative orientation of every face from a BFS spanning tree of the face graph.
 
     Two faces on an edge agree when they traverse it in opposite directions. The parity of a
     face (flip it or not) is the XOR of the disagreements along its tree path to the root of its
     component, computed for all faces at once by pointer doubling. One virtual root joined to
-    the first face of every component makes it a single BFS.
+    the first face of every component makes it a single BFS. Where no two faces disagree, every
+    parity is False without a tree.
 
     Returns
     -------
@@ -519,9 +643,8 @@ def _parity(Fs: np.ndarray, h2e: np.ndarray) -> tuple[np.ndarray, np.ndarray, in
     """
     m = len(Fs)
     flat = Fs.ravel()
-    count = np.bincount(h2e)
-    if count.max(initial=0) <= 2:  # as _split leaves it: the first and last half-edge, no sort
-        first, last = edge_half_edges(h2e, len(count))
+    _, h2e, count, first, last = table
+    if first is not None:  # as _split leaves it: the first and last half-edge, no sort
         two = np.flatnonzero(count == 2)
         ha, hb = first[two], last[two]
     else:
@@ -536,6 +659,15 @@ def _parity(Fs: np.ndarray, h2e: np.ndarray) -> tuple[np.ndarray, np.ndarray, in
 
     G = sp.coo_matrix((np.ones(len(fa)), (fa, fb)), shape=(m, m))
     ncomp, comp = _cc(G, directed=False)
+    if not rel.any():
+        # Consistently oriented already: every tree path XORs to False, nothing conflicts, and
+        # the tree is not needed (0.3 s at 1M faces).
+        return (
+            np.zeros(m, dtype=bool),
+            comp.astype(np.int64),
+            int(ncomp),
+            np.zeros((0, 2), np.int64),
+        )
     roots = np.full(ncomp, m, dtype=np.int64)
     np.minimum.at(roots, comp, np.arange(m))
     rows = np.concatenate([fa, np.full(ncomp, m)])
@@ -545,15 +677,15 @@ def _parity(Fs: np.ndarray, h2e: np.ndarray) -> tuple[np.ndarray, np.ndarray, in
     pred = pred.astype(np.int64)
     pred[m] = m
 
-    # Disagreement on each tree edge (pred[f], f), looked up among the adjacent pairs.
-    keys = np.minimum(fa, fb) * (m + 1) + np.maximum(fa, fb)
-    ko = np.argsort(keys)
-    f = np.arange(m)
-    tree = np.minimum(pred[:m], f) * (m + 1) + np.maximum(pred[:m], f)
-    loc = np.clip(np.searchsorted(keys[ko], tree), 0, max(len(keys) - 1, 0))
+    # Disagreement on each tree edge (pred[f], f): the half-edge of f whose face across is
+    # pred[f] (two faces share at most one edge, or they would be duplicates), instead of looking
+    # the pair up among the sorted pairs (0.30 s at 1M faces).
+    across = np.full(3 * m, -1, dtype=np.int64)  # never m, the virtual root
+    across[ha], across[hb] = fb, fa
+    disagree = np.zeros(3 * m, dtype=bool)
+    disagree[ha], disagree[hb] = rel, rel
     acc = np.zeros(m + 1, dtype=bool)
-    if len(keys):
-        acc[:m] = (pred[:m] != m) & rel[ko[loc]]
+    acc[:m] = ((across.reshape(m, 3) == pred[:m, None]) & disagree.reshape(m, 3)).any(axis=1)
     p = pred
     while not np.all(p == m):
         acc = acc ^ acc[p]
@@ -563,38 +695,59 @@ def _parity(Fs: np.ndarray, h2e: np.ndarray) -> tuple[np.ndarray, np.ndarray, in
     return parity, comp.astype(np.int64), int(ncomp), np.stack([ha[bad], hb[bad]], axis=1)
 
 
+def _cross(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """``np.cross(a, b)`` of (k, 3) arrays, written into ``out``: the same products and
+    differences, with one (k,) temporary instead of ``np.cross``'s (k, 3) ones (fresh memory
+    costs more than the arithmetic here: 0.22 -> 0.05 s at 1M faces)."""
+    tmp = np.empty(len(a))
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        np.multiply(a[:, j], b[:, k], out=out[:, i])
+        np.multiply(a[:, k], b[:, j], out=tmp)
+        out[:, i] -= tmp
+    return out
+
+
 def _orient_components(
     V: np.ndarray,
     Fs: np.ndarray,
-    h2e: np.ndarray,
+    half_count: np.ndarray,
     parity: np.ndarray,
     comp: np.ndarray,
     ncomp: int,
+    area: np.ndarray,
 ) -> np.ndarray:
     """Choose each component's global orientation; returns the final per-face flip, (m,) bool.
 
     Closed components get a positive signed volume. Open components (and closed ones of
     negligible volume) keep the input winding of the larger part of their area.
+
+    ``half_count`` is the number of faces on the edge of every half-edge, ``area`` the face
+    areas (:func:`_clean` has both). The corners are three (m, 3) row gathers (``V[Fo]``, one
+    (m, 3, 3) gather, took 0.30 s at 1M faces) with the same sums in the same order, centred in
+    place; the signed volumes stay one ``np.einsum`` over (m, 3) rows, whose summation order
+    depends on the CPU's vector width. In place because fresh memory is what costs here: in the
+    middle of :func:`clean` this took 0.58 s at 1M faces with new arrays, 0.20 s without.
     """
-    Fo = np.where(parity[:, None], Fs[:, [0, 2, 1]], Fs)
-    P = V[Fo]
-    area = face_areas(V, Fo)
-    on_boundary = (np.bincount(h2e)[h2e] == 1).reshape(-1, 3).any(axis=1)
+    on_boundary = (half_count == 1).reshape(-1, 3).any(axis=1)
     closed = np.bincount(comp, weights=on_boundary, minlength=ncomp) == 0
-    # Volume about each component's centroid, for accuracy far from the origin.
-    nf = np.bincount(comp, minlength=ncomp)
-    cen = (
-        np.stack(
-            [np.bincount(comp, weights=P[:, :, k].mean(axis=1), minlength=ncomp) for k in range(3)],
-            axis=1,
-        )
-        / nf[:, None]
-    )
-    P = P - cen[comp][:, None, :]
-    vol6 = np.einsum("ij,ij->i", P[:, 0], np.cross(P[:, 1], P[:, 2]))
-    vol = np.bincount(comp, weights=vol6, minlength=ncomp) / 6
     total = np.bincount(comp, weights=area, minlength=ncomp)
     flipped = np.bincount(comp, weights=area * parity, minlength=ncomp)
+    if not closed.any():  # no volume decides anything
+        return parity ^ (flipped > 0.5 * total)[comp]
+    Fo = _flip(Fs, parity)
+    P = [V.take(corner, axis=0) for corner in np.ascontiguousarray(Fo.T)]  # (m, 3) each
+    # Volume about each component's centroid, for accuracy far from the origin.
+    nf = np.bincount(comp, minlength=ncomp)
+    mean = P[0] + P[1]
+    mean += P[2]
+    mean /= 3  # each face's centroid, as V[Fo].mean(axis=1)
+    cen = np.stack([np.bincount(comp, weights=mean[:, k], minlength=ncomp) for k in range(3)], 1)
+    cen = cen / nf[:, None]
+    at = cen[comp] if ncomp > 1 else cen
+    for x in P:
+        x -= at
+    vol6 = np.einsum("ij,ij->i", P[0], _cross(P[1], P[2], out=mean))
+    vol = np.bincount(comp, weights=vol6, minlength=ncomp) / 6
     decisive = closed & (np.abs(vol) > 1e-9 * total**1.5)
     flip = np.where(decisive, vol < 0, flipped > 0.5 * total)
     return parity ^ flip[comp]

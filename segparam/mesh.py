@@ -158,18 +158,30 @@ def mesh_arrays(V: Any, F: Any = None) -> tuple[Any, Any]:
 def _face_cross(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """``(V[F1] - V[F0]) x (V[F2] - V[F0])`` per face, coordinate by coordinate: the same bits as
     ``np.cross`` in 0.12 s instead of 0.21 s at 1M faces (``np.cross`` moves axes and
-    broadcasts; this gathers each coordinate once)."""
+    broadcasts; this gathers each coordinate once). The gathers are nine 1-D ``take``: indexing
+    the second axis of a 2-D array, ``Vt[:, Ft[k]]``, took three times as long (0.13 s against
+    0.04 s at 1M faces). Differences and products are formed in place, into the output: in the
+    middle of a stage fresh memory costs as much as the arithmetic."""
     Vt, Ft = np.ascontiguousarray(V.T), np.ascontiguousarray(F.T)
-    x = Vt[:, Ft[0]]
-    u, w = Vt[:, Ft[1]] - x, Vt[:, Ft[2]] - x
-    return np.stack(
-        [u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]], 1
-    )
+    x = [c.take(Ft[0]) for c in Vt]
+    u = [c.take(Ft[1]) for c in Vt]
+    w = [c.take(Ft[2]) for c in Vt]
+    for k in range(3):
+        u[k] -= x[k]
+        w[k] -= x[k]
+    out = np.empty((len(Ft[0]), 3), dtype=u[0].dtype)  # the dtype np.cross would give
+    tmp = x[0]  # spent
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        np.multiply(u[j], w[k], out=out[:, i])
+        np.multiply(u[k], w[j], out=tmp)
+        out[:, i] -= tmp
+    return out
 
 
 def _norm3(c: np.ndarray) -> np.ndarray:
     """Row norms of (k, 3) vectors without overflow (coordinates up to ~1e150 square fine)."""
-    return np.hypot(np.hypot(c[:, 0], c[:, 1]), c[:, 2])
+    r = np.hypot(c[:, 0], c[:, 1])
+    return np.hypot(r, c[:, 2], out=r)
 
 
 def face_areas(V: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -179,7 +191,9 @@ def face_areas(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     -------
     (m,) float64 ndarray
     """
-    return 0.5 * _norm3(_face_cross(V, F))
+    a = _norm3(_face_cross(V, F))
+    a *= 0.5
+    return a
 
 
 def face_normals(
@@ -356,8 +370,13 @@ def _half_edges(F: np.ndarray) -> np.ndarray:
     return np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
 
 
-def edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def edges(F: np.ndarray, *, ends: bool = False) -> tuple[np.ndarray, ...]:
     """Unique undirected edges and the edge of every half-edge.
+
+    ``ends=True`` also returns what the sort already knows: each edge's number of half-edges
+    (``np.bincount(half_to_edge)``) and its first and last half-edge (:func:`edge_half_edges`),
+    without computing them again (the edge table of :mod:`segparam.clean`: 0.355 -> 0.31 s at
+    1M faces).
 
     Returns
     -------
@@ -365,24 +384,40 @@ def edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         Sorted vertex pairs, ``E[:, 0] < E[:, 1]``.
     half_to_edge : (3 m,) int64 ndarray
         Edge index of half-edge ``3 f + k`` (from ``F[f, k]`` to ``F[f, (k + 1) % 3]``).
+    count, first, last : (e,) int64 ndarrays
+        Only with ``ends=True``.
     """
     F = np.asarray(F)
-    a = F.ravel().astype(np.int64)  # half-edge 3 f + k: F[f, k] -> F[f, k + 1]; keys overflow int32
-    b = F[:, [1, 2, 0]].ravel().astype(np.int64)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    # half-edge 3 f + k: F[f, k] -> F[f, k + 1]; keys overflow int32. Temporaries are reused
+    # in place: in the middle of a stage, fresh memory costs as much as the arithmetic.
+    a = F.ravel().astype(np.int64, copy=False)
+    b = F[:, [1, 2, 0]].ravel().astype(np.int64, copy=False)  # an array of its own
+    hi = np.maximum(a, b)
+    lo = np.minimum(a, b, out=b)
     n = int(hi.max(initial=0)) + 1
-    key = lo * n + hi
+    key = lo * n
+    key += hi
+    del a, b, lo, hi
     # np.unique(key, return_inverse=True), by one stable argsort: 0.70 -> 0.33 s at 1M faces
     # with the min / max above (sorting each pair along its row took half of it)
     order = np.argsort(key, kind="stable")
     sk = key[order]
-    new = np.ones(len(key), dtype=bool)
+    del key
+    new = np.ones(len(sk), dtype=bool)
     new[1:] = sk[1:] != sk[:-1]
-    inverse = np.empty(len(key), dtype=np.int64)
-    inverse[order] = np.cumsum(new) - 1
+    rank = np.cumsum(new)
+    rank -= 1
+    inverse = np.empty(len(sk), dtype=np.int64)
+    inverse[order] = rank
+    del rank
+    extra = ()
+    if ends:
+        bounds = np.append(np.flatnonzero(new), len(sk))  # the stable sort keeps half-edge order
+        extra = (np.diff(bounds), order[bounds[:-1]], order[bounds[1:] - 1])
+    del order
     keys = sk[new]
     E = np.stack([keys // n, keys % n], axis=1)
-    return E, inverse
+    return (E, inverse, *extra)
 
 
 def edge_half_edges(h2e: np.ndarray, n_edges: int) -> tuple[np.ndarray, np.ndarray]:

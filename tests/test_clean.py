@@ -403,3 +403,145 @@ def test_negative_tolerance_is_rejected():
     V, F = tri_grid(3, 3)
     with pytest.raises(InvalidMeshError, match="tolerances must be >= 0"):
         clean(V, F, merge_tolerance=-1.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Helpers against the computations they replace
+# ---------------------------------------------------------------------------------------------
+
+
+def test_apart_only_when_the_kd_tree_and_grouping_find_nothing():
+    """The sweep that lets merging skip grouping and the k-d tree never misses a close pair or
+    a duplicate; it does answer True on generic points."""
+    from scipy.spatial import cKDTree
+
+    from segparam.clean import _apart
+
+    rng = np.random.default_rng(4)
+    grid = tri_grid(30, 30)[0]
+    answers = set()
+    for t in range(80):
+        P = rng.normal(size=(int(rng.integers(2, 400)), 3)) * 10.0 ** rng.integers(-3, 4)
+        if t % 3 == 0:  # near-duplicates, some closer than the tolerance, some just beyond
+            k = int(rng.integers(1, len(P) + 1))
+            P = np.vstack([P, P[:k] + rng.normal(size=(k, 3)) * 10.0 ** rng.integers(-12, -6)])
+        if t % 4 == 1:  # exact duplicates, -0.0
+            P = np.vstack([P, P[: int(rng.integers(1, len(P) + 1))], -0.0 * P[:1]])
+        if t % 5 == 0:
+            P = grid + rng.normal(size=grid.shape) * 1e-12 * (t % 2)
+        P = P + 0.0
+        diag = float(np.linalg.norm(np.ptp(P, axis=0)))
+        tol = 1e-9 * diag * 10.0 ** rng.integers(0, 4) * (t % 7 != 0)  # and 0
+        close = len(cKDTree(P).query_pairs(tol)) > 0 if tol > 0 else False
+        equal = len(np.unique(P, axis=0)) < len(P)
+        apart = _apart(P, tol)
+        assert not (apart and (close or equal))
+        answers.add((apart, close or equal))
+    assert answers == {(True, False), (False, True), (False, False)}
+    assert not _apart(np.array([[0.0, 0, 0], [1e-170, 0, 0], [1, 1, 1]]), 1e-160)
+
+
+def test_glue_pairs_without_sort_are_the_sorted_pairs():
+    """On edge-manifold faces the pairs come from each edge's first and last half-edge; they are
+    the pairs of the sort by edge, interior edges of the face (more first) and half-edge."""
+    from segparam.clean import _glue_pairs
+
+    rng = np.random.default_rng(5)
+    for _ in range(40):
+        V, F = tri_grid(int(rng.integers(2, 9)), int(rng.integers(2, 9)))
+        F = F[rng.random(len(F)) < 0.8]
+        F = np.where((rng.random(len(F)) < 0.3)[:, None], F[:, ::-1], F)[rng.permutation(len(F))]
+        if len(F) == 0:
+            continue
+        E, h2e = mesh.edges(F)
+        count = np.bincount(h2e, minlength=len(E))
+        regular = (count[h2e] == 2).reshape(-1, 3).sum(axis=1)
+        h = np.arange(len(h2e))
+        order = np.lexsort((h, -regular[h // 3], h2e))
+        lead = np.flatnonzero(count[h2e[order]] == 2)[::2]
+        want = np.stack([order[lead], order[lead + 1]], axis=1)
+        glue, nonmanifold, _ = _glue_pairs(F)
+        np.testing.assert_array_equal(glue, want)
+        assert nonmanifold == 0
+
+
+def test_cross_is_numpys_cross_bit_for_bit():
+    from segparam.clean import _cross
+
+    rng = np.random.default_rng(6)
+    a = rng.normal(size=(500, 3)) * 10.0 ** rng.integers(-8, 9, size=(500, 1))
+    b = rng.normal(size=(500, 3)) * 10.0 ** rng.integers(-8, 9, size=(500, 1))
+    out = np.empty((500, 3))
+    assert _cross(a, b, out) is out
+    assert out.tobytes() == np.cross(a, b).tobytes()
+
+
+def test_duplicates_from_the_edges_are_the_grouped_triples():
+    """Duplicate faces found through the faces across each edge (edge-manifold faces) or by
+    grouping sorted triples (otherwise) are the later faces of equal sorted triples."""
+    from segparam.clean import _duplicates, _edge_table
+
+    rng = np.random.default_rng(8)
+    seen = set()
+    for t in range(60):
+        V, F = tri_grid(int(rng.integers(2, 8)), int(rng.integers(2, 8)))
+        F = F[rng.random(len(F)) < 0.8]
+        if len(F) == 0:
+            continue
+        k = int(rng.integers(0, 4))
+        extra = F[rng.integers(0, len(F), k)]  # copies, some rotated or reversed
+        extra = np.where((rng.random(k) < 0.5)[:, None], extra[:, ::-1], extra[:, [1, 2, 0]])
+        if t % 3 == 0:  # a third face on an edge: the grouping path
+            extra = np.vstack([extra, [F[0, 0], F[0, 1], len(V) - 1]])
+        F = np.vstack([F, extra])[rng.permutation(len(F) + len(extra))]
+        S = np.sort(F, axis=1)
+        _, first = np.unique(S, axis=0, return_index=True)
+        want = np.ones(len(F), dtype=bool)
+        want[first] = False
+        got = _duplicates(F, _edge_table(mesh.edges(F)))
+        np.testing.assert_array_equal(got, want)
+        seen.add((bool(want.any()), bool(mesh.edge_face_counts(F)[1].max() > 2)))
+    assert len(seen) == 4  # with and without duplicates, on both paths
+
+
+def test_split_corners_graph_as_csr_gives_the_same_fans():
+    """Consistently oriented faces build the corner graph as CSR directly; the fans are those of
+    the graph of glued pairs (pinched vertices included)."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    from segparam.clean import _glue_pairs, _split_corners
+
+    def reference(F, glue):
+        m, flat = len(F), F.ravel()
+        ha, hb = glue[:, 0], glue[:, 1]
+        na, nb = ha - ha % 3 + (ha % 3 + 1) % 3, hb - hb % 3 + (hb % 3 + 1) % 3
+        rows, cols = np.concatenate([ha, na]), np.concatenate([nb, hb])
+        G = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * m, 3 * m))
+        k, lab = connected_components(G, directed=False)
+        first = np.full(k, 3 * m)
+        np.minimum.at(first, lab, np.arange(3 * m))
+        src = flat[first]
+        o = np.lexsort((first, src))
+        primary = np.ones(k, dtype=bool)
+        primary[1:] = src[o][1:] != src[o][:-1]
+        final = np.concatenate([o[primary], o[~primary]])
+        newid = np.empty(k, dtype=np.int64)
+        newid[final] = np.arange(k)
+        return newid[lab].reshape(m, 3), src[final]
+
+    rng = np.random.default_rng(9)
+    pinched = 0
+    for _ in range(30):
+        V, F = tri_grid(int(rng.integers(3, 8)), int(rng.integers(3, 8)))
+        F = F[rng.random(len(F)) < 0.75]  # holes: vertices where two fans touch
+        if len(F) == 0:
+            continue
+        F = F[rng.permutation(len(F))]
+        glue, _, _ = _glue_pairs(F)
+        Fs, src = _split_corners(F, glue)
+        want_F, want_src = reference(F, glue)
+        np.testing.assert_array_equal(Fs, want_F)
+        np.testing.assert_array_equal(src, want_src)
+        pinched += len(src) > len(np.unique(F))
+    assert pinched > 0

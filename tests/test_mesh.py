@@ -302,3 +302,26 @@ def test_disk_labels_fast_path_on_manifold_meshes_agrees_with_the_general_test(h
     lab = np.zeros(len(F), dtype=np.int64)
     for manifold_edges in (None, mesh.edges(F)):
         assert not mesh.disk_labels(F, lab, 1, manifold_edges=manifold_edges)[0]
+
+
+def test_face_cross_is_numpys_cross_bit_for_bit():
+    rng = np.random.default_rng(7)
+    for scale in (1e-9, 1.0, 1e12):
+        V = rng.normal(size=(50, 3)) * scale + rng.normal(size=3) * scale * 10
+        F = rng.integers(0, 50, size=(400, 3))
+        want = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+        got = mesh._face_cross(V, F)
+        assert got.shape == want.shape and got.tobytes() == want.tobytes()
+
+
+def test_edges_ends_are_the_counts_and_first_and_last_half_edges():
+    rng = np.random.default_rng(8)
+    for F in [tri_grid(7, 5)[1], rng.integers(0, 12, size=(200, 3)), np.zeros((0, 3), int)]:
+        E, h2e = mesh.edges(F)
+        E2, h2e2, count, first, last = mesh.edges(F, ends=True)
+        np.testing.assert_array_equal(E2, E)
+        np.testing.assert_array_equal(h2e2, h2e)
+        np.testing.assert_array_equal(count, np.bincount(h2e, minlength=len(E)))
+        want_first, want_last = mesh.edge_half_edges(h2e, len(E))
+        np.testing.assert_array_equal(first, want_first)
+        np.testing.assert_array_equal(last, want_last)
