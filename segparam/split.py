@@ -335,8 +335,8 @@ def _warm_worker(blas_threads: int = 1) -> None:
     first chart arrives (about 1 s of imports and 0.3-0.9 s of kernel loading).
 
     Without the limit each worker's BLAS started a thread per core: on 2 cores, 2 workers ran 4
-    busy threads, and the 1M-face brain's parameterize stage took 21.6 s against 17.3 s with one
-    thread each (``benchmarks/bench_scaling.py --sizes 1000000``, BENCHMARKS.md section 0.1).
+    busy threads, and the 1M-face brain's parameterize stage took 24.6-26.0 s against 18.0-18.3 s
+    with one thread each (two runs each; BENCHMARKS.md section 0, session 9).
     """
     from threadpoolctl import threadpool_limits
 
