@@ -22,7 +22,7 @@ from scipy.sparse.csgraph import connected_components as _cc
 from scipy.spatial import cKDTree
 
 from .errors import InvalidMeshError
-from .mesh import check_mesh, edge_half_edges, edges, face_areas, mesh_arrays
+from .mesh import check_mesh, cross_into, edge_half_edges, edges, face_areas, mesh_arrays
 
 __all__ = [
     "REASON_DUPLICATE",
@@ -695,18 +695,6 @@ def _parity(Fs: np.ndarray, table: tuple) -> tuple[np.ndarray, np.ndarray, int, 
     return parity, comp.astype(np.int64), int(ncomp), np.stack([ha[bad], hb[bad]], axis=1)
 
 
-def _cross(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> np.ndarray:
-    """``np.cross(a, b)`` of (k, 3) arrays, written into ``out``: the same products and
-    differences, with one (k,) temporary instead of ``np.cross``'s (k, 3) ones (fresh memory
-    costs more than the arithmetic here: 0.22 -> 0.05 s at 1M faces)."""
-    tmp = np.empty(len(a))
-    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
-        np.multiply(a[:, j], b[:, k], out=out[:, i])
-        np.multiply(a[:, k], b[:, j], out=tmp)
-        out[:, i] -= tmp
-    return out
-
-
 def _orient_components(
     V: np.ndarray,
     Fs: np.ndarray,
@@ -746,7 +734,7 @@ def _orient_components(
     at = cen[comp] if ncomp > 1 else cen
     for x in P:
         x -= at
-    vol6 = np.einsum("ij,ij->i", P[0], _cross(P[1], P[2], out=mean))
+    vol6 = np.einsum("ij,ij->i", P[0], cross_into(P[1].T, P[2].T, out=mean))
     vol = np.bincount(comp, weights=vol6, minlength=ncomp) / 6
     decisive = closed & (np.abs(vol) > 1e-9 * total**1.5)
     flip = np.where(decisive, vol < 0, flipped > 0.5 * total)

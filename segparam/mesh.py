@@ -170,10 +170,20 @@ def _face_cross(V: np.ndarray, F: np.ndarray) -> np.ndarray:
         u[k] -= x[k]
         w[k] -= x[k]
     out = np.empty((len(Ft[0]), 3), dtype=u[0].dtype)  # the dtype np.cross would give
-    tmp = x[0]  # spent
+    return cross_into(u, w, out, tmp=x[0])  # x is spent
+
+
+def cross_into(a, b, out: np.ndarray, *, tmp: np.ndarray | None = None) -> np.ndarray:
+    """``np.cross`` of k vectors given by their three coordinate arrays (``a[j]``: (k,) each; a
+    list, or ``A.T`` of a (k, 3) array), written into ``out`` (k, 3): the same products and
+    differences in the same order, so the same bits, with one (k,) temporary (``tmp``, if the
+    caller has a spent one) instead of ``np.cross``'s (k, 3) ones: in the middle of a stage,
+    fresh memory costs as much as the arithmetic (clean's signed volumes: 0.22 -> 0.05 s at 1M
+    faces)."""
+    tmp = np.empty(len(out), dtype=out.dtype) if tmp is None else tmp
     for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
-        np.multiply(u[j], w[k], out=out[:, i])
-        np.multiply(u[k], w[j], out=tmp)
+        np.multiply(a[j], b[k], out=out[:, i])
+        np.multiply(a[k], b[j], out=tmp)
         out[:, i] -= tmp
     return out
 
