@@ -782,9 +782,9 @@ def _first_scale(charts: list[_Chart], resolution: int, padding: int, hi: float)
     first = _FIRST_GUESS * hi
     if len(charts) < _MODEL_CHARTS:
         return first
-    side = np.sqrt([ch.area for ch in charts])
+    area = np.array([ch.area for ch in charts])
     grow = padding + 1
-    a, b = float((side**2).sum()), 2.0 * grow * float(side.sum())
+    a, b = float(area.sum()), 2.0 * grow * float(np.sqrt(area).sum())
     c = len(charts) * grow**2 - _MODEL_FILL * (resolution - 2 * padding) ** 2
     if c >= 0:  # the padding alone would fill it: leave it to the search
         return first
