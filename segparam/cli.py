@@ -522,7 +522,15 @@ class _StageBar:
 
 
 def _progress_bar(quiet: bool) -> _StageBar | None:
-    return None if quiet or not sys.stderr.isatty() else _StageBar()
+    """The progress bar on a terminal (None with ``--quiet`` or when stderr is not one), after a
+    line saying that the first run after installing compiles the kernels (20-30 s, once)."""
+    if quiet or not sys.stderr.isatty():
+        return None
+    from .warmup import kernels_cached
+
+    if not kernels_cached():
+        print("segparam: first run after installing: compiling (once, 20-30 s)", file=sys.stderr)
+    return _StageBar()
 
 
 def _picture_options(args: argparse.Namespace, source: Path):

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from . import __version__
+from . import __version__, warmup
 from .clean import CleanResult, clean
 from .errors import ConfigError, InvalidMeshError
 from .mesh import boundary_edges, face_areas, mesh_arrays, unit_frame
@@ -621,14 +621,21 @@ def _chart_mesh(
             f"mesh has {n_faces} faces; the limit is {MAX_FACES} (about 3 KB of memory per face)"
         )
     # The split stage's worker processes start now: their start-up (2 s of CPU each) overlaps
-    # with cleaning and segmenting, which run on one core.
+    # with cleaning and segmenting, which run on one core. On the first run after installing,
+    # so does the compilation of the packer's kernels (segparam.warmup), which the pack stage
+    # then finds in numba's cache.
+    compiling = warmup.start() if cfg.pack.method == "raster" else None
     workers = start_workers(cfg.split) if n_faces >= PARALLEL_MIN_FACES else None
     try:
         charted = _chart_stages(V, F, cfg, seed, report, workers)
     except BaseException:
         stop_workers(workers, now=True)
+        warmup.stop(compiling, now=True)
         raise
     stop_workers(workers)
+    if compiling is not None:  # the first run: the wait for the packer's kernels, if any
+        with _timed(charted.timings, "compile"):
+            warmup.stop(compiling)
     return charted
 
 

@@ -1,0 +1,82 @@
+"""The packer's kernels compiled in the background on the first run after installing.
+
+numba compiles every kernel the first time a process calls it and keeps the machine code in its
+on-disk cache (``cache=True``), so only the first run after installing pays: 27-30 s of the
+README's quick start, 16 s of it the packer's trial kernel (`segparam.canvas.trial`), which the
+pipeline calls only at its last stage. When that kernel is not in the cache yet,
+:func:`segparam.pipeline.build_atlas` starts one process that compiles it (it packs two
+triangles, :func:`_compile`) while this one cleans, segments and parameterizes on the other
+core; before packing it waits for that process (:func:`stop`) and then loads the kernel from the
+cache. The quick start's first run: 30 -> about 20 s (BENCHMARKS.md, section 0.1). Later runs
+find the kernel cached and start nothing.
+
+If the process fails (or the cache cannot be written), the pack stage compiles the kernel
+itself, as it would without this module.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+__all__ = ["kernels_cached", "start", "stop"]
+
+# The package's parent directory: the background process imports this very copy of segparam
+# (a source tree on sys.path, an editable or a regular install), whose cache it must fill.
+_ROOT = str(Path(__file__).resolve().parent.parent)
+
+
+def kernels_cached() -> bool:
+    """Whether numba's on-disk cache holds the packer's trial kernel (its index file exists).
+
+    True as well where numba caches nothing (``NUMBA_DISABLE_JIT``, no cache locator): there is
+    nothing a background process could prepare.
+    """
+    from .canvas import trial
+
+    cache_file = getattr(getattr(trial, "_cache", None), "_cache_file", None)  # numba's
+    index = getattr(cache_file, "_index_path", None)
+    return index is None or os.path.exists(index)
+
+
+def _command() -> list[str]:
+    """The background process: this interpreter, this copy of segparam, :func:`_compile`."""
+    code = f"import sys; sys.path.insert(0, {_ROOT!r}); import segparam.warmup as w; w._compile()"
+    return [sys.executable, "-c", code]
+
+
+def start() -> subprocess.Popen | None:
+    """Start compiling the packer's kernels in a background process, or None when they are
+    already cached. The caller ends it with :func:`stop`."""
+    if kernels_cached():
+        return None
+    return subprocess.Popen(
+        _command(), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
+
+
+def stop(process: subprocess.Popen | None, *, now: bool = False) -> None:
+    """Wait for the process of :func:`start` to finish (None: nothing to do), or, with ``now``
+    (an error or Ctrl-C in the caller), end it at once. Either way no process is left behind."""
+    if process is None:
+        return
+    if now:
+        process.kill()
+    process.wait()
+
+
+def _compile() -> None:
+    """In the background process: pack two triangles, which compiles the trial kernel (and the
+    kernels it calls) with the argument types the pipeline uses, into numba's cache. Ctrl-C is
+    the caller's to handle (it ends this process)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    import numpy as np
+
+    from .pack import pack_charts
+
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    tri = np.array([[0, 1, 2]])
+    pack_charts([uv, uv], [tri, tri], [0.5, 0.5])

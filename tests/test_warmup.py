@@ -1,0 +1,92 @@
+"""The packer's kernels compiled in the background on a cold numba cache (segparam.warmup)."""
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from meshes import spherical_cap
+
+from segparam import pipeline, warmup
+from segparam.pack import pack_charts
+
+SLEEPER = [sys.executable, "-c", "import time; time.sleep(60)"]
+
+
+def test_kernels_are_cached_once_the_packer_ran():
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    pack_charts([uv], [np.array([[0, 1, 2]])], [0.5])
+    assert warmup.kernels_cached()
+    assert warmup.start() is None  # nothing to compile: no process
+
+
+def test_stop_now_ends_the_process_at_once(monkeypatch):
+    monkeypatch.setattr(warmup, "kernels_cached", lambda: False)
+    monkeypatch.setattr(warmup, "_command", lambda: SLEEPER)
+    process = warmup.start()
+    assert process is not None and process.poll() is None
+    t = time.perf_counter()
+    warmup.stop(process, now=True)
+    assert process.returncode is not None and time.perf_counter() - t < 10
+    warmup.stop(None)  # no process: nothing to do
+
+
+def test_an_error_in_a_stage_ends_the_compiling_process(monkeypatch):
+    started = []
+
+    def start():
+        started.append(subprocess.Popen(SLEEPER))
+        return started[-1]
+
+    def fail(*args):
+        raise RuntimeError("stage failed")
+
+    monkeypatch.setattr(warmup, "start", start)
+    monkeypatch.setattr(pipeline, "_chart_stages", fail)
+    V, F = spherical_cap(6, 6)
+    with pytest.raises(RuntimeError, match="stage failed"):
+        pipeline.build_atlas(V, F)
+    assert len(started) == 1 and started[0].returncode is not None  # killed and reaped
+
+
+SCRIPT = """
+import json, sys
+sys.path.insert(0, {tests!r})
+from meshes import spherical_cap
+from segparam import warmup
+from segparam.canvas import trial
+from segparam.pipeline import PipelineConfig, build_atlas
+cold = not warmup.kernels_cached()
+V, F = spherical_cap(12, 12)
+atlas = build_atlas(V, F, PipelineConfig().replace(pack={{"resolution": 256}}))
+print(json.dumps({{
+    "cold": cold,
+    "waited": "compile" in atlas.timings,
+    "hits": sum(trial.stats.cache_hits.values()),
+    "misses": sum(trial.stats.cache_misses.values()),
+}}))
+"""
+
+
+@pytest.mark.slow
+def test_a_cold_cache_gets_the_packer_compiled_in_the_background(tmp_path):
+    """In a process with an empty numba cache, build_atlas has the packer's kernels compiled by
+    the background process, waits for it and loads them from the cache: it never compiles them
+    itself (a cache miss). Compiles every kernel the pipeline uses: about 20-30 s."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    script = SCRIPT.format(tests=os.path.dirname(__file__))
+    result = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, env=env, cwd=tmp_path
+    )
+    assert result.returncode == 0, result.stderr
+    out = json.loads(result.stdout.splitlines()[-1])
+    assert out == {"cold": True, "waited": True, "hits": 1, "misses": 0}
+    # the next process finds the kernels cached and starts nothing
+    result = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, env=env, cwd=tmp_path
+    )
+    out = json.loads(result.stdout.splitlines()[-1])
+    assert out == {"cold": False, "waited": False, "hits": 1, "misses": 0}
