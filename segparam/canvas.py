@@ -175,6 +175,16 @@ def _turned_bottom(low, high, left, right, rows, cols, cy, cx, k, out):  # pragm
 
 
 @njit(cache=True, nogil=True)
+def _equal_rows(a, i, j, n):  # pragma: no cover - compiled
+    """``a[i, :n] == a[j, :n]`` everywhere (``np.array_equal`` of the two took 0.5 s of the first
+    run's compile)."""
+    for c in range(n):
+        if a[i, c] != a[j, c]:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
 def _same_turns(base, rows, cols, k1, k2):  # pragma: no cover - compiled
     """Whether two quarter turns of `base` are the same footprint (shapes already equal)."""
     side = max(rows, cols)
@@ -211,7 +221,9 @@ def new_canvas(width, height, pad, block):  # pragma: no cover - compiled
     prefix = np.zeros((nr, nc + 1), dtype=np.int32)
     max_free = np.zeros(nr, dtype=np.int64)
     free_bits = np.zeros((nr, (nc + 63) // 64 + 1), dtype=np.uint64)  # a zero word past the end
-    _pool_rows(forbid, block, coarse, prefix, max_free, free_bits, 0, nr, 0, nc)
+    # np.int64(0), not 0, at the kernels' calls: a literal argument compiles another copy of
+    # the callee (five such copies took 1.2 s of the first run's compile)
+    _pool_rows(forbid, block, coarse, prefix, max_free, free_bits, np.int64(0), nr, np.int64(0), nc)
     return forbid, sky, coarse, prefix, max_free, free_bits
 
 
@@ -480,10 +492,10 @@ def coarse_runs(mask, rows, cols, block):  # pragma: no cover - compiled
             else:
                 j += 1
     runs = runs[:n].copy()
-    if n:  # widest first: it is the run most likely to collide, so tests fail early
-        first = runs[0].copy()
-        runs[0] = runs[widest]
-        runs[widest] = first
+    # widest first: it is the run most likely to collide, so tests fail early (swapped entry by
+    # entry: a row assignment ``runs[0] = runs[widest]`` took 2 s of the first run's compile)
+    for k in range(3 if n else 0):
+        runs[0, k], runs[widest, k] = runs[widest, k], runs[0, k]
     return runs, cr, cc
 
 
@@ -611,7 +623,7 @@ def trial(
     prefix, max_free, free_bits = empty[3].copy(), empty[4].copy(), empty[5].copy()
     height, width = forbid.shape
     sky_min = np.empty((width + _SKY_BLOCK - 1) // _SKY_BLOCK, dtype=np.int64)
-    _sky_minima(sky, sky_min, 0, width)
+    _sky_minima(sky, sky_min, np.int64(0), width)  # not a literal 0: see new_canvas
     result = np.full((len(entry_ptr) - 1, 6), -1, dtype=np.int64)
     need = 0
     no_fill = np.zeros((0, 0), dtype=np.int32)
@@ -640,7 +652,7 @@ def trial(
         shape = np.zeros((n_or, 2), dtype=np.int64)
         cy = np.zeros(n_or)
         ident = np.zeros((n_or, 2), dtype=np.int64)  # (angle entry, quarter turns)
-        n_kept = 0
+        n_kept = np.int64(0)  # not a literal 0 (new_canvas): it is passed to _equal_rows
         for e in range(e0, e1):
             a = e - e0
             n1, n0 = base_shape[a, 0], base_shape[a, 1]
@@ -665,7 +677,7 @@ def trial(
                 duplicate = False
                 for o in range(first, n_kept):  # a symmetric footprint: keep the first turn
                     if shape[o, 0] == r and shape[o, 1] == c and cy[o] == y:
-                        if np.array_equal(bottoms[o, :c], bottoms[n_kept, :c]):
+                        if _equal_rows(bottoms, o, n_kept, c):
                             if _same_turns(base, n1, n0, ident[o, 1], k):
                                 duplicate = True
                                 break
@@ -746,10 +758,11 @@ def trial(
                     s_col[n_s] = cols[g] * block
                     n_s += 1
         # slide each start down and left; the lowest centroid wins
-        best_o = -1
+        best_o = np.int64(-1)  # not literals (see new_canvas): they are passed to kernels
         best_key = np.inf
-        best_col = 0
-        best_row = 0
+        best_col = np.int64(0)
+        best_row = np.int64(0)
+        zero = np.int64(0)  # the rows _before does not compare
         for g in range(n_s):
             o, row, col = s_or[g], s_row[g], s_col[g]
             if slot[o] < 0:
@@ -768,7 +781,7 @@ def trial(
                 has_edges[q] = True
             row, col = _slide_edges(forbid, downs[q], lefts[q], row, col, slide_steps)
             key = row + cy[o]
-            if best_o < 0 or _before(key, col, o, 0, best_key, best_col, best_o, 0):
+            if best_o < 0 or _before(key, col, o, zero, best_key, best_col, best_o, zero):
                 best_o, best_key, best_col, best_row = o, key, col, row
         if best_o < 0:
             return t, result, need
