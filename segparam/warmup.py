@@ -50,8 +50,10 @@ def _command() -> list[str]:
 
 def start() -> subprocess.Popen | None:
     """Start compiling the packer's kernels in a background process, or None when they are
-    already cached. The caller ends it with :func:`stop`."""
-    if kernels_cached():
+    already cached, or when this interpreter is embedded in another program (``sys.executable``
+    is then that program, e.g. an old Blender's, not a Python to run). The caller ends it with
+    :func:`stop`."""
+    if kernels_cached() or not Path(sys.executable).name.lower().startswith("python"):
         return None
     return subprocess.Popen(
         _command(), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL

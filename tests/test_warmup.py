@@ -34,6 +34,13 @@ def test_stop_now_ends_the_process_at_once(monkeypatch):
     warmup.stop(None)  # no process: nothing to do
 
 
+def test_no_process_from_an_embedded_interpreter(monkeypatch):
+    monkeypatch.setattr(warmup, "kernels_cached", lambda: False)
+    monkeypatch.setattr(warmup, "_command", lambda: SLEEPER)
+    monkeypatch.setattr(sys, "executable", "/opt/blender/blender")  # not a Python to run
+    assert warmup.start() is None
+
+
 def test_an_error_in_a_stage_ends_the_compiling_process(monkeypatch):
     started = []
 
