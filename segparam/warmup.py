@@ -37,7 +37,13 @@ def kernels_cached() -> bool:
     """
     from .canvas import trial
 
-    cache_file = getattr(getattr(trial, "_cache", None), "_cache_file", None)  # numba's
+    return _cached(trial)
+
+
+def _cached(kernel) -> bool:
+    """Whether numba's on-disk cache has an index for this compiled function (True where numba
+    caches nothing)."""
+    cache_file = getattr(getattr(kernel, "_cache", None), "_cache_file", None)  # numba's
     index = getattr(cache_file, "_index_path", None)
     return index is None or os.path.exists(index)
 
@@ -62,12 +68,34 @@ def start() -> subprocess.Popen | None:
 
 def stop(process: subprocess.Popen | None, *, now: bool = False) -> None:
     """Wait for the process of :func:`start` to finish (None: nothing to do), or, with ``now``
-    (an error or Ctrl-C in the caller), end it at once. Either way no process is left behind."""
+    (an error or Ctrl-C in the caller), end it at once. Either way no process is left behind.
+
+    While it is still compiling, this process compiles the preview renderer's kernel
+    (`segparam.render`, 1.2 s, the next one an atlas with pictures needs), if it is not cached:
+    the wait would otherwise be idle.
+    """
     if process is None:
         return
     if now:
         process.kill()
+    elif process.poll() is None:
+        _compile_preview()
     process.wait()
+
+
+def _compile_preview() -> None:
+    """Render one triangle from one viewpoint (:func:`segparam.render.render_preview`, the
+    argument types the pictures use), unless the renderer's kernel is cached."""
+    from . import render
+
+    if _cached(render._render_kernel):
+        return
+    import numpy as np
+
+    V = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    uv = V[:, :2].copy()
+    tri = np.array([[0, 1, 2]])
+    render.render_preview(V, tri, uv, tri, views=[(30.0, 20.0)], size=8)
 
 
 def _compile() -> None:

@@ -97,3 +97,24 @@ def test_a_cold_cache_gets_the_packer_compiled_in_the_background(tmp_path):
     )
     out = json.loads(result.stdout.splitlines()[-1])
     assert out == {"cold": False, "waited": False, "hits": 1, "misses": 0}
+
+
+PREVIEW = """
+import json, subprocess, sys
+from segparam import render, warmup
+sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(1)"])
+warmup.stop(sleeper)
+print(json.dumps({"ended": sleeper.returncode, "compiled": len(render._render_kernel.signatures)}))
+"""
+
+
+@pytest.mark.slow
+def test_the_wait_compiles_the_preview_renderer(tmp_path):
+    """While the background process still runs, stop() compiles the preview's kernel in this
+    process (on an empty cache), then waits for the process to end."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    result = subprocess.run(
+        [sys.executable, "-c", PREVIEW], capture_output=True, text=True, env=env, cwd=tmp_path
+    )
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout.splitlines()[-1]) == {"ended": 0, "compiled": 1}
