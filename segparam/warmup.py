@@ -6,9 +6,10 @@ README's quick start, 16 s of it the packer's trial kernel (`segparam.canvas.tri
 pipeline calls only at its last stage. When that kernel is not in the cache yet,
 :func:`segparam.pipeline.build_atlas` starts one process that compiles it (it packs two
 triangles, :func:`_compile`) while this one cleans, segments and parameterizes on the other
-core; before packing it waits for that process (:func:`stop`) and then loads the kernel from the
-cache. The quick start's first run: 30 -> about 20 s (BENCHMARKS.md, section 0.1). Later runs
-find the kernel cached and start nothing.
+core; before packing it waits for that process (:func:`stop`, which meanwhile compiles the
+preview renderer's kernel here) and then loads the kernel from the cache. The quick start's first
+run: 34 -> about 20 s (BENCHMARKS.md, section 12). Later runs find the kernel cached and start
+nothing.
 
 If the process fails (or the cache cannot be written), the pack stage compiles the kernel
 itself, as it would without this module.
