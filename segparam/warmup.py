@@ -17,6 +17,7 @@ itself, as it would without this module.
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import subprocess
@@ -24,6 +25,8 @@ import sys
 from pathlib import Path
 
 __all__ = ["kernels_cached", "start", "stop"]
+
+log = logging.getLogger(__name__)
 
 # The package's parent directory: the background process imports this very copy of segparam
 # (a source tree on sys.path, an editable or a regular install), whose cache it must fill.
@@ -77,11 +80,16 @@ def stop(process: subprocess.Popen | None, *, now: bool = False) -> None:
     """
     if process is None:
         return
-    if now:
+    try:
+        if now:
+            process.kill()
+        elif process.poll() is None:
+            _compile_preview()
+        process.wait()
+    except BaseException:  # Ctrl-C during the wait: the process goes too
         process.kill()
-    elif process.poll() is None:
-        _compile_preview()
-    process.wait()
+        process.wait()
+        raise
 
 
 def _compile_preview() -> None:
@@ -96,7 +104,10 @@ def _compile_preview() -> None:
     V = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     uv = V[:, :2].copy()
     tri = np.array([[0, 1, 2]])
-    render.render_preview(V, tri, uv, tri, views=[(30.0, 20.0)], size=8)
+    try:  # a head start only: the pictures compile the kernel themselves (and report failures)
+        render.render_preview(V, tri, uv, tri, views=[(30.0, 20.0)], size=8)
+    except Exception as exc:
+        log.debug("preview kernel not compiled ahead (%r)", exc)
 
 
 def _compile() -> None:

@@ -34,6 +34,20 @@ def test_stop_now_ends_the_process_at_once(monkeypatch):
     warmup.stop(None)  # no process: nothing to do
 
 
+def test_ctrl_c_during_the_wait_ends_the_process(monkeypatch):
+    monkeypatch.setattr(warmup, "kernels_cached", lambda: False)
+    monkeypatch.setattr(warmup, "_command", lambda: SLEEPER)
+
+    def interrupted():
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(warmup, "_compile_preview", interrupted)
+    process = warmup.start()
+    with pytest.raises(KeyboardInterrupt):
+        warmup.stop(process)
+    assert process.returncode is not None  # killed and reaped, not left running
+
+
 def test_no_process_from_an_embedded_interpreter(monkeypatch):
     monkeypatch.setattr(warmup, "kernels_cached", lambda: False)
     monkeypatch.setattr(warmup, "_command", lambda: SLEEPER)
