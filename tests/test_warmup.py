@@ -97,20 +97,10 @@ def test_a_cold_cache_gets_the_packer_compiled_in_the_background(tmp_path):
     """In a process with an empty numba cache, build_atlas has the packer's kernels compiled by
     the background process, waits for it and loads them from the cache: it never compiles them
     itself (a cache miss). Compiles every kernel the pipeline uses: about 20-30 s."""
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
     script = SCRIPT.format(tests=os.path.dirname(__file__))
-    result = subprocess.run(
-        [sys.executable, "-c", script], capture_output=True, text=True, env=env, cwd=tmp_path
-    )
-    assert result.returncode == 0, result.stderr
-    out = json.loads(result.stdout.splitlines()[-1])
-    assert out == {"cold": True, "waited": True, "hits": 1, "misses": 0}
+    assert _run(script, tmp_path) == {"cold": True, "waited": True, "hits": 1, "misses": 0}
     # the next process finds the kernels cached and starts nothing
-    result = subprocess.run(
-        [sys.executable, "-c", script], capture_output=True, text=True, env=env, cwd=tmp_path
-    )
-    out = json.loads(result.stdout.splitlines()[-1])
-    assert out == {"cold": False, "waited": False, "hits": 1, "misses": 0}
+    assert _run(script, tmp_path) == {"cold": False, "waited": False, "hits": 1, "misses": 0}
 
 
 PREVIEW = """
@@ -126,9 +116,15 @@ print(json.dumps({"ended": sleeper.returncode, "compiled": len(render._render_ke
 def test_the_wait_compiles_the_preview_renderer(tmp_path):
     """While the background process still runs, stop() compiles the preview's kernel in this
     process (on an empty cache), then waits for the process to end."""
+    assert _run(PREVIEW, tmp_path) == {"ended": 0, "compiled": 1}
+
+
+def _run(script: str, tmp_path) -> dict:
+    """Run a script in a fresh process whose numba cache is ``tmp_path / "cache"`` (empty the
+    first time); the JSON it prints last."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
     result = subprocess.run(
-        [sys.executable, "-c", PREVIEW], capture_output=True, text=True, env=env, cwd=tmp_path
+        [sys.executable, "-c", script], capture_output=True, text=True, env=env, cwd=tmp_path
     )
     assert result.returncode == 0, result.stderr
-    assert json.loads(result.stdout.splitlines()[-1]) == {"ended": 0, "compiled": 1}
+    return json.loads(result.stdout.splitlines()[-1])
