@@ -1,0 +1,145 @@
+"""The machine's other cores for the split stage's solver batches: helper processes forked from
+this one.
+
+The split stage (:mod:`segparam.split`) maps most charts in batches: one
+:func:`segparam.parameterize.solve_charts` call maps many charts at once, and each chart's map
+does not depend on the other charts of its batch. A batch is numpy and scipy work in one thread
+(brain-20k's largest: 0.44 s), and the interpreter lock keeps threads from sharing it (two
+threads took 1.01-1.30x the time of one; BENCHMARKS.md section 0.1). :class:`Helpers` runs parts
+of such work in processes forked from this one when the work starts: a fork shares the mesh,
+the imported modules and the loaded compiled kernels, so a helper costs a few milliseconds to
+start instead of the ~2 s of CPU a spawned worker spends importing (the split stage's worker
+processes for meshes of 100k+ faces, :func:`segparam.split.start_workers`, are spawned).
+
+Forking is used on Linux only: macOS's system libraries are not safe to use after a fork, and
+Windows has none. Elsewhere, or with one job, the parts run one after the other in this process,
+with the same result. Each helper limits its BLAS to its share of the cores and ignores Ctrl-C
+(the Ctrl-C of a terminal goes to the whole process group; this process stops the helpers).
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import os
+import signal
+import sys
+import warnings
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+#: The BLAS thread limit of a helper process (kept for the process's life).
+_HELPER_BLAS_LIMIT: list = []
+
+
+def fork_available() -> bool:
+    """Whether helpers can be forked here (Linux with the ``fork`` start method)."""
+    return sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
+
+
+def _helper_start(blas_threads: int) -> None:
+    """A helper's start: Ctrl-C ignored, its BLAS limited to ``blas_threads`` threads.
+
+    Without the limit a helper's BLAS would start a thread per core next to this process's
+    own (the spawned workers' finding: on 2 cores, 4 busy threads made the 1M-face brain's
+    parameterize stage 36% slower; BENCHMARKS.md section 0.2).
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from threadpoolctl import threadpool_limits
+
+    _HELPER_BLAS_LIMIT.append(threadpool_limits(blas_threads, user_api="blas"))
+
+
+class Helpers:
+    """Up to ``jobs - 1`` helper processes, forked on the first :meth:`map` that has work for
+    them and ended when the ``with`` block ends (at once on an error or Ctrl-C).
+
+    Parameters
+    ----------
+    jobs : int
+        Processes to share the work, this one included (1: no helper).
+    """
+
+    def __init__(self, jobs: int) -> None:
+        self.jobs = max(1, int(jobs)) if fork_available() else 1
+        self._pool: ProcessPoolExecutor | None = None
+
+    def __enter__(self) -> Helpers:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.close(now=exc_type is not None)
+
+    @property
+    def started(self) -> bool:
+        """Whether the helpers run (forked by :meth:`start` or a :meth:`map`)."""
+        return self._pool is not None
+
+    def start(self) -> Helpers:
+        """Fork the helpers now (a no-op with one job): their start then overlaps what this
+        process does until their first part arrives."""
+        if self._pool is None and self.jobs > 1:
+            blas_threads = max(1, (os.cpu_count() or 1) // self.jobs)
+            self._pool = ProcessPoolExecutor(
+                max_workers=self.jobs - 1,
+                mp_context=multiprocessing.get_context("fork"),
+                initializer=_helper_start,
+                initargs=(blas_threads,),
+            )
+            with warnings.catch_warnings():
+                # Python 3.12+ warns on a fork from a process with threads (here BLAS's idle
+                # ones, which their library stops and restarts around a fork).
+                warnings.filterwarnings("ignore", message=".*fork.*", category=DeprecationWarning)
+                self._pool.submit(int)  # forks every helper (the fork context starts them all)
+        return self
+
+    def map(self, fn: Callable[..., Any], parts: Sequence[tuple]) -> list:
+        """``[fn(*args) for args in parts]``: the first part in this process, the others in the
+        helpers, at the same time. An exception of any part is raised here once every part has
+        ended (the first part's first)."""
+        if len(parts) <= 1 or self.jobs <= 1:
+            return [fn(*args) for args in parts]
+        pool = self.start()._pool
+        futures = [pool.submit(fn, *args) for args in parts[1:]]
+        try:
+            with _blas_threads(max(1, (os.cpu_count() or 1) // self.jobs)):
+                first = fn(*parts[0])
+        except Exception:
+            wait(futures)
+            raise
+        out = [first]
+        for args, future in zip(parts[1:], futures, strict=True):
+            try:
+                out.append(future.result())
+            except BrokenProcessPool:  # a helper died (killed): its part, and the rest, here
+                log.warning("a helper process ended unexpectedly; going on in this one")
+                self.close(now=True)
+                self.jobs = 1
+                out.append(fn(*args))
+        return out
+
+    def close(self, *, now: bool = False) -> None:
+        """End the helpers: once they are idle, without waiting for them to exit, or ``now``
+        (terminated, and waited for)."""
+        pool, self._pool = self._pool, None
+        if pool is None:
+            return
+        if now:
+            processes = list((getattr(pool, "_processes", None) or {}).values())
+            pool.shutdown(wait=False, cancel_futures=True)
+            for process in processes:
+                process.terminate()
+                process.join()
+        else:
+            pool.shutdown(wait=False)
+
+
+def _blas_threads(n: int):
+    """This process's BLAS limited to ``n`` threads while its part runs next to the helpers'."""
+    from .linalg import _blas_controller
+
+    return _blas_controller().limit(limits=n, user_api="blas")

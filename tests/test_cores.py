@@ -1,0 +1,118 @@
+import os
+import signal
+
+import numpy as np
+import pytest
+import trimesh
+
+import segparam.cores as cores
+import segparam.split as split
+from segparam.cores import Helpers
+from segparam.segment import segment
+from segparam.split import SplitConfig, parameterize_charts
+
+needs_fork = pytest.mark.skipif(not cores.fork_available(), reason="helpers are forked (Linux)")
+
+
+def _pid_of(x):
+    return x, os.getpid()
+
+
+def _fails_on(x):
+    if x == 1:
+        raise ValueError(f"part {x} failed")
+    return x
+
+
+def _helper_state():
+    from threadpoolctl import threadpool_info
+
+    blas = [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
+    return blas, signal.getsignal(signal.SIGINT)
+
+
+@needs_fork
+def test_the_first_part_runs_here_the_others_in_helpers_in_order():
+    with Helpers(3) as helpers:
+        out = helpers.map(_pid_of, [(0,), (1,), (2,)])
+    assert [x for x, _ in out] == [0, 1, 2]
+    assert out[0][1] == os.getpid()
+    assert all(pid != os.getpid() for _, pid in out[1:])
+
+
+@needs_fork
+def test_an_error_in_a_helper_is_raised_here_and_the_helper_stays_usable():
+    with Helpers(2) as helpers:
+        with pytest.raises(ValueError, match="part 1 failed"):
+            helpers.map(_fails_on, [(0,), (1,)])
+        assert helpers.map(_fails_on, [(2,), (3,)]) == [2, 3]
+
+
+@needs_fork
+def test_helpers_ignore_ctrl_c_and_take_their_share_of_the_blas_threads():
+    with Helpers(2) as helpers:
+        (_, here), (blas, sigint) = helpers.map(_helper_state, [(), ()])
+    assert sigint == signal.SIG_IGN and here != signal.SIG_IGN
+    assert blas and all(t == max(1, (os.cpu_count() or 1) // 2) for t in blas)
+
+
+@needs_fork
+def test_an_error_here_ends_the_helpers_at_once():
+    helpers = Helpers(2).start()
+    processes = list(helpers._pool._processes.values())
+    with pytest.raises(KeyboardInterrupt), helpers:
+        raise KeyboardInterrupt
+    assert not helpers.started
+    assert processes and not any(p.is_alive() for p in processes)
+
+
+def test_without_fork_or_with_one_job_every_part_runs_here(monkeypatch):
+    assert Helpers(1).map(_pid_of, [(0,), (1,)]) == [(0, os.getpid()), (1, os.getpid())]
+    monkeypatch.setattr(cores, "fork_available", lambda: False)
+    helpers = Helpers(4)
+    assert helpers.jobs == 1
+    assert helpers.map(_pid_of, [(0,), (1,)]) == [(0, os.getpid()), (1, os.getpid())]
+    assert not helpers.started
+
+
+@needs_fork
+def test_charts_solved_in_parts_are_the_one_process_charts_bit_for_bit(monkeypatch):
+    # Small parts, so that a small mesh's batches are shared; the spy shows they were.
+    monkeypatch.setattr(split, "PART_MIN_FACES", 100)
+    monkeypatch.setattr(split, "FORK_MIN_FACES", 0)
+    parts = []
+    real_map = Helpers.map
+
+    def spy(self, fn, args):
+        parts.append(len(args))
+        return real_map(self, fn, args)
+
+    monkeypatch.setattr(Helpers, "map", spy)
+    # an icosphere: two hemispheres in one batch, then their four halves in another
+    sphere = trimesh.creation.icosphere(3)
+    V, F = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    seg = segment(V, F, seed=0)
+    serial = parameterize_charts(V, F, seg.labels, config=SplitConfig(n_jobs=1))
+    assert parts == []
+    shared = parameterize_charts(V, F, seg.labels, config=SplitConfig(n_jobs=2))
+    assert parts and max(parts) == 2
+    assert np.array_equal(serial.splits, shared.splits)
+    assert len(serial.charts) == len(shared.charts)
+    for a, b in zip(serial.charts, shared.charts, strict=True):
+        assert np.array_equal(a.faces, b.faces) and np.array_equal(a.uv, b.uv)
+        assert a.quality == b.quality and a.method == b.method
+
+
+def _dies_in_a_helper(x):
+    if os.getpid() != x:
+        os.kill(os.getpid(), signal.SIGKILL)
+    return x
+
+
+@needs_fork
+def test_a_helper_that_dies_is_replaced_by_this_process(caplog):
+    with Helpers(2) as helpers:
+        here = os.getpid()
+        assert helpers.map(_dies_in_a_helper, [(here,), (here,)]) == [here, here]
+        assert helpers.jobs == 1 and not helpers.started
+    assert "ended unexpectedly" in caplog.text
