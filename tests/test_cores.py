@@ -116,3 +116,9 @@ def test_a_helper_that_dies_is_replaced_by_this_process(caplog):
         assert helpers.map(_dies_in_a_helper, [(here,), (here,)]) == [here, here]
         assert helpers.jobs == 1 and not helpers.started
     assert "ended unexpectedly" in caplog.text
+
+
+@needs_fork
+def test_a_big_machine_gets_a_few_helpers_not_one_per_core():
+    assert Helpers(64).jobs == cores.MAX_HELPERS + 1
+    assert Helpers(2).jobs == 2
