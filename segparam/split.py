@@ -26,7 +26,8 @@ the charts the per-chart path gives (the solver's up to a rigid motion and round
 chart that fails there goes on to the per-chart path and its splits. 2,000 one-triangle charts
 took 2.6 s, 600 hemispheres of 300 small spheres 6.2 s. A large batch is cut by whole charts and
 its parts solved side by side in this process and in helpers forked from it
-(:func:`_solve_batch`, :class:`segparam.cores.Helpers`), with the one call's result.
+(:func:`_solve_batch`, :class:`segparam.cores.Helpers`), with the one call's result; so are the
+pieces the solver takes one by one in a round (:func:`_try_pieces`).
 """
 
 from __future__ import annotations
@@ -1068,6 +1069,14 @@ def _solve_in_rounds(
             got = _bulk_charts(V, F, sub_b, order, bounds, cfg, size, rejected, helpers=helpers)
             mapped = {batch[i]: got[i][0][0] for i in got}
         rejected_at = {batch[i] for i in np.flatnonzero(rejected)}
+        # the pieces the solver takes alone (big ones, and the first try of a segmentation chart)
+        alone = [
+            k for k, (*_, tried) in enumerate(pending)
+            if k not in mapped and not (tried or k in rejected_at)
+        ]  # fmt: skip
+        tasks = [(V[sub.of(src)[0]], sub.of(src)[1], faces, src, depth)
+                 for src, faces, depth, *_ in (pending[k] for k in alone)]  # fmt: skip
+        tried_alone = dict(zip(alone, _try_pieces(tasks, cfg, seed, helpers), strict=True))
         nxt, cut = [], []
         for k, (src, faces, depth, path, tried) in enumerate(pending):  # loop over pieces
             vertices, local_F = sub.of(src)
@@ -1082,7 +1091,7 @@ def _solve_in_rounds(
                 chart = None
                 status["bijective"] = depth == 0 and bool(bulk_bijective[src])
             else:
-                chart = _try_piece(V[vertices], local_F, faces, src, depth, cfg, seed, status)
+                chart, status = tried_alone[k]
             if depth == 0:
                 first[src] = _first_pass(chart, status)
             open_pieces[src] -= 1
@@ -1140,6 +1149,43 @@ def _solve_source(
         parts = divide(W, faces, seed=seed)
         stack.extend((p, depth + 1) for p in reversed(parts) if len(p))
     return pieces, first
+
+
+def _try_pieces(tasks: list[tuple], cfg: SplitConfig, seed: int, helpers: Helpers | None) -> list:
+    """:func:`_try_piece` of every ``(V, F, faces, src, depth)`` in ``tasks``: ``[(chart or None,
+    status)]``, in order. With helpers (once started, or for ``FORK_MIN_FACES`` faces or more),
+    the pieces are dealt to the processes largest first, each to the least loaded (faces), and
+    solved side by side: each piece's result is its own, whichever process solves it."""
+    sizes = np.array([len(t[2]) for t in tasks], dtype=np.int64)
+    jobs = (
+        1 if helpers is None else min(helpers.jobs, len(tasks), int(sizes.sum()) // PART_MIN_FACES)
+    )
+    if jobs > 1 and not helpers.started and sizes.sum() < FORK_MIN_FACES:
+        jobs = 1
+    if jobs <= 1:
+        return _try_all(tasks, cfg=cfg, seed=seed)
+    load, owner = np.zeros(jobs, dtype=np.int64), np.empty(len(tasks), dtype=np.int64)
+    for i in np.argsort(-sizes, kind="stable").tolist():  # loop over the few pieces: deal them
+        owner[i] = int(np.argmin(load))
+        load[owner[i]] += sizes[i]
+    groups = [np.flatnonzero(owner == j) for j in range(jobs)]
+    done = helpers.map(
+        functools.partial(_try_all, cfg=cfg, seed=seed), [([tasks[i] for i in g],) for g in groups]
+    )
+    out: list = [None] * len(tasks)
+    for g, results in zip(groups, done, strict=True):
+        for i, result in zip(g.tolist(), results, strict=True):
+            out[i] = result
+    return out
+
+
+def _try_all(tasks: list[tuple], *, cfg: SplitConfig, seed: int) -> list:
+    """:func:`_try_pieces`' work in one process (module level: it is sent to a helper)."""
+    out = []
+    for V, F, faces, src, depth in tasks:  # loop over the pieces of one process
+        status: dict = {}
+        out.append((_try_piece(V, F, faces, src, depth, cfg, seed, status), status))
+    return out
 
 
 def _first_pass(chart: Chart | None, status: dict) -> bool:

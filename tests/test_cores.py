@@ -76,27 +76,32 @@ def test_without_fork_or_with_one_job_every_part_runs_here(monkeypatch):
 
 
 @needs_fork
-def test_charts_solved_in_parts_are_the_one_process_charts_bit_for_bit(monkeypatch):
-    # Small parts, so that a small mesh's batches are shared; the spy shows they were.
+@pytest.mark.parametrize("alone", [False, True], ids=["batches", "pieces alone"])
+def test_charts_solved_in_parts_are_the_one_process_charts_bit_for_bit(monkeypatch, alone):
+    # Small parts, so that a small mesh's work is shared; the spy shows it was. With `alone`,
+    # no piece fits a batch: the pieces the solver takes one by one are dealt out instead.
     monkeypatch.setattr(split, "PART_MIN_FACES", 100)
     monkeypatch.setattr(split, "FORK_MIN_FACES", 0)
-    parts = []
+    if alone:
+        monkeypatch.setattr(split, "BATCH_MAX_VERTICES", 10)
+    shared_by = []
     real_map = Helpers.map
 
     def spy(self, fn, args):
-        parts.append(len(args))
+        shared_by.append((fn.func.__name__, len(args)))
         return real_map(self, fn, args)
 
     monkeypatch.setattr(Helpers, "map", spy)
-    # an icosphere: two hemispheres in one batch, then their four halves in another
+    # an icosphere: two hemispheres, then their four halves
     sphere = trimesh.creation.icosphere(3)
     V, F = np.asarray(sphere.vertices), np.asarray(sphere.faces)
     seg = segment(V, F, seed=0)
     serial = parameterize_charts(V, F, seg.labels, config=SplitConfig(n_jobs=1))
-    assert parts == []
+    assert shared_by == []
     shared = parameterize_charts(V, F, seg.labels, config=SplitConfig(n_jobs=2))
-    assert parts and max(parts) == 2
+    assert ("_try_all" if alone else "_solve_part", 2) in shared_by
     assert np.array_equal(serial.splits, shared.splits)
+    assert np.array_equal(serial.first_pass_bijective, shared.first_pass_bijective)
     assert len(serial.charts) == len(shared.charts)
     for a, b in zip(serial.charts, shared.charts, strict=True):
         assert np.array_equal(a.faces, b.faces) and np.array_equal(a.uv, b.uv)
