@@ -49,8 +49,8 @@ def _helper_start(blas_threads: int) -> None:
     """A helper's start: Ctrl-C ignored, its BLAS limited to ``blas_threads`` threads.
 
     Without the limit a helper's BLAS would start a thread per core next to this process's
-    own (the spawned workers' finding: on 2 cores, 4 busy threads made the 1M-face brain's
-    parameterize stage 36% slower; BENCHMARKS.md section 0.2).
+    own (the spawned workers' finding: on 2 cores, 4 busy threads took the 1M-face brain's
+    parameterize stage 24.6-26.0 s against 18.0-18.3 s; BENCHMARKS.md section 0.1, session 9).
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     from threadpoolctl import threadpool_limits
