@@ -67,10 +67,15 @@ class Helpers:
     jobs : int
         Processes to share the work, this one included (1: no helper; at most
         ``MAX_HELPERS + 1``).
+    prepare : callable, optional
+        Called in this process just before the helpers are forked: what every process will
+        need, done once here (a compiled kernel loaded, or compiled on a first run, is then
+        the helpers' too instead of compiled again in each).
     """
 
-    def __init__(self, jobs: int) -> None:
+    def __init__(self, jobs: int, *, prepare: Callable[[], None] | None = None) -> None:
         self.jobs = min(max(1, int(jobs)), MAX_HELPERS + 1) if fork_available() else 1
+        self._prepare = prepare
         self._pool: ProcessPoolExecutor | None = None
 
     def __enter__(self) -> Helpers:
@@ -88,6 +93,8 @@ class Helpers:
         """Fork the helpers now (a no-op with one job): their start then overlaps what this
         process does until their first part arrives."""
         if self._pool is None and self.jobs > 1:
+            if self._prepare is not None:
+                self._prepare()
             blas_threads = max(1, (os.cpu_count() or 1) // self.jobs)
             self._pool = ProcessPoolExecutor(
                 max_workers=self.jobs - 1,

@@ -333,6 +333,12 @@ def _nearest_first(dist, vertex, n):  # pragma: no cover - compiled
     return order
 
 
+def kernels_loaded() -> bool:
+    """Whether this process has the solver's compiled kernels yet (loaded from numba's cache,
+    or compiled on a first run): the neighbourhood search's, which loads the other."""
+    return bool(_rings.signatures)
+
+
 @njit(cache=True, nogil=True)
 def _rings(indptr, indices, V, need, ptr):  # pragma: no cover - compiled
     """Fill ``N_i`` (see :func:`neighbourhoods`) for every vertex: i, its 1-ring in adjacency

@@ -66,6 +66,7 @@ from .parameterize import (
     TANGENTS,
     ChartMaps,
     charts_quality,
+    kernels_loaded,
     parameterize_chart,
     quality_records,
     solve_charts,
@@ -348,11 +349,24 @@ def _warm_worker(blas_threads: int = 1) -> None:
     from threadpoolctl import threadpool_limits
 
     _WORKER_BLAS_LIMIT.append(threadpool_limits(blas_threads, user_api="blas"))
+    _solve_a_bent_grid()
+
+
+def _solve_a_bent_grid() -> None:
+    """Map a 5 x 5 bent grid: loads (or, on a first run, compiles) the solver's kernels."""
     u, v = np.meshgrid(np.linspace(0.0, 1.0, 5), np.linspace(0.0, 1.0, 5))
     V = np.stack([u.ravel(), v.ravel(), 0.3 * (u * v).ravel()], axis=1)
     q = (np.arange(4)[:, None] * 5 + np.arange(4)[None, :]).ravel()  # lower-left corners
     F = np.concatenate([np.stack([q, q + 1, q + 6], 1), np.stack([q, q + 6, q + 5], 1)])
     parameterize_chart(V, F, refine="slim")
+
+
+def _before_the_helpers() -> None:
+    """:class:`segparam.cores.Helpers`' ``prepare``: the solver's compiled kernels in this
+    process before a helper is forked, so that the helpers do not each compile them again on a
+    first run (the neighbourhood search, ~1 s)."""
+    if not kernels_loaded():
+        _solve_a_bent_grid()
 
 
 def start_workers(config: SplitConfig | None = None):
@@ -467,7 +481,9 @@ def parameterize_charts(
     jobs = _jobs(cfg)
     # Below PARALLEL_MIN_FACES the large solver batches are shared with forked helpers; above,
     # whole charts go to the spawned workers (which then have the cores).
-    with Helpers(jobs if len(F) < PARALLEL_MIN_FACES else 1) as helpers:
+    with Helpers(
+        jobs if len(F) < PARALLEL_MIN_FACES else 1, prepare=_before_the_helpers
+    ) as helpers:
         return _parameterize(
             V, F, n_src, sources, order, bounds, sub, cfg, seed, size, jobs, progress,
             _MeshAffinity(V, F, affinity), workers, helpers,

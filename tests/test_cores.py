@@ -92,6 +92,8 @@ def test_charts_solved_in_parts_are_the_one_process_charts_bit_for_bit(monkeypat
         return real_map(self, fn, args)
 
     monkeypatch.setattr(Helpers, "map", spy)
+    prepared = []
+    monkeypatch.setattr(split, "_before_the_helpers", lambda: prepared.append(True))
     # an icosphere: two hemispheres, then their four halves
     sphere = trimesh.creation.icosphere(3)
     V, F = np.asarray(sphere.vertices), np.asarray(sphere.faces)
@@ -100,6 +102,7 @@ def test_charts_solved_in_parts_are_the_one_process_charts_bit_for_bit(monkeypat
     assert shared_by == []
     shared = parameterize_charts(V, F, seg.labels, config=SplitConfig(n_jobs=2))
     assert ("_try_all" if alone else "_solve_part", 2) in shared_by
+    assert prepared == [True]  # the kernels loaded once, before the fork
     assert np.array_equal(serial.splits, shared.splits)
     assert np.array_equal(serial.first_pass_bijective, shared.first_pass_bijective)
     assert len(serial.charts) == len(shared.charts)
@@ -127,3 +130,33 @@ def test_a_helper_that_dies_is_replaced_by_this_process(caplog):
 def test_a_big_machine_gets_a_few_helpers_not_one_per_core():
     assert Helpers(64).jobs == cores.MAX_HELPERS + 1
     assert Helpers(2).jobs == 2
+
+
+_PREPARED = []
+
+
+def _prepared():
+    return list(_PREPARED)
+
+
+@needs_fork
+def test_prepare_runs_here_once_before_the_helpers_are_forked():
+    with Helpers(2, prepare=lambda: _PREPARED.append(os.getpid())) as helpers:
+        seen = helpers.map(_prepared, [(), ()])
+        helpers.map(_prepared, [(), ()])
+    assert _PREPARED == [os.getpid()]
+    assert seen == [[os.getpid()], [os.getpid()]]  # the helper was forked after it
+    _PREPARED.clear()
+
+
+def test_the_split_stage_loads_the_solvers_kernels_before_forking():
+    import subprocess
+    import sys
+
+    code = (
+        "import segparam.split as s, segparam.parameterize as p\n"
+        "assert not p.kernels_loaded()\n"
+        "s._before_the_helpers()\n"
+        "assert p.kernels_loaded()\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=300)
