@@ -50,9 +50,14 @@ def test_an_error_in_a_helper_is_raised_here_and_the_helper_stays_usable():
 
 @needs_fork
 def test_helpers_ignore_ctrl_c_and_take_their_share_of_the_blas_threads():
-    with Helpers(2) as helpers:
-        (_, here), (blas, sigint) = helpers.map(_helper_state, [(), ()])
-    assert sigint == signal.SIG_IGN and here != signal.SIG_IGN
+    # this process handles Ctrl-C (a test run in the background may have it ignored)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with Helpers(2) as helpers:
+            (_, here), (blas, sigint) = helpers.map(_helper_state, [(), ()])
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert here == signal.default_int_handler and sigint == signal.SIG_IGN
     assert blas and all(t == max(1, (os.cpu_count() or 1) // 2) for t in blas)
 
 
