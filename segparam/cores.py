@@ -132,6 +132,9 @@ class Helpers:
                 self.close(now=True)
                 self.jobs = 1
                 out.append(fn(*args))
+            except Exception:
+                wait(futures)
+                raise
         return out
 
     def close(self, *, now: bool = False) -> None:
