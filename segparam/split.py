@@ -477,7 +477,6 @@ def parameterize_charts(
     order, bounds = group_by_label(labels, n_src)
     sources = [order[bounds[s] : bounds[s + 1]] for s in range(n_src)]
     sub = _submeshes(F, labels, order, bounds)
-    # Small charts, all at once: already in mesh indices and units.
     jobs = _jobs(cfg)
     # Below PARALLEL_MIN_FACES the large solver batches are shared with forked helpers; above,
     # whole charts go to the spawned workers (which then have the cores).
@@ -495,6 +494,7 @@ def _parameterize(
     helpers,
 ):  # fmt: skip
     """:func:`parameterize_charts` once its input is checked, ``V`` in the unit frame."""
+    # Small charts, all at once: already in mesh indices and units.
     bulk_rejected, bulk_bijective = np.zeros(n_src, dtype=bool), np.zeros(n_src, dtype=bool)
     final = _bulk_charts(
         V, F, sub, order, bounds, cfg, size, bulk_rejected, bulk_bijective, helpers=helpers
@@ -748,7 +748,7 @@ def _project_union(V: np.ndarray, F: np.ndarray, vert_chart: np.ndarray, n_chart
 #: this 2-core machine against one call (min of 3 runs, the same maps): 1,945-19,263 faces
 #: 0.097-0.437 s -> 0.069-0.297 s, 2,139 faces 0.092 -> 0.062 s, 1,268 faces 0.048 -> 0.045 s;
 #: 739 and 342 faces slower (0.057 -> 0.058 s, 0.062 -> 0.072 s). (Two parts at once each take
-#: about 70% of the whole's time here, not half: the two cores share one memory system.)
+#: about 70% of the whole's time here, not half: the two processes slow each other down.)
 PART_MIN_FACES = 700
 #: The helpers are forked for the first batch of at least this many faces (later batches are
 #: shared from ``2 * PART_MIN_FACES`` faces): forking and starting them costs 0.05-0.09 s once
@@ -768,9 +768,9 @@ def _solve_batch(
     """:func:`segparam.parameterize.solve_charts` of a union of charts (its layout: vertices and
     faces ordered by chart), cut by whole charts into up to ``helpers.jobs`` parts of about the
     same number of faces (each at least ``PART_MIN_FACES``; the helpers are started by a batch of
-    ``FORK_MIN_FACES`` or more), solved side by side and put back
-    together in order. A chart's map does not depend on the other charts of its call, so the
-    result is the one call's, bit for bit."""
+    ``FORK_MIN_FACES`` or more), solved side by side and put back together in order. A chart's
+    map does not depend on the other charts of its call, so the result is the one call's, bit
+    for bit."""
     n_charts = int(vert_chart[-1]) + 1
     face_chart = vert_chart[F[:, 0]]
     jobs = 1 if helpers is None else min(helpers.jobs, len(F) // PART_MIN_FACES, n_charts)
