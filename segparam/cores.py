@@ -11,9 +11,10 @@ the imported modules and the loaded compiled kernels, so a helper costs a few mi
 start instead of the ~2 s of CPU a spawned worker spends importing (the split stage's worker
 processes for meshes of 100k+ faces, :func:`segparam.split.start_workers`, are spawned).
 
-Forking is used on Linux only: macOS's system libraries are not safe to use after a fork, and
-Windows has none. Elsewhere, or with one job, the parts run one after the other in this process,
-with the same result. Each helper limits its BLAS to its share of the cores and ignores Ctrl-C
+Forking is used on Linux only (macOS's system libraries are not safe to use after a fork, and
+Windows has none), from the main thread, and not in a daemonic process (:func:`fork_available`).
+Elsewhere, or with one job, the parts run one after the other in this process, with the same
+result. Each helper limits its BLAS to its share of the cores and ignores Ctrl-C
 (the Ctrl-C of a terminal goes to the whole process group; this process stops the helpers).
 """
 
@@ -24,6 +25,7 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
 import warnings
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, wait
@@ -41,8 +43,16 @@ MAX_HELPERS = 3
 
 
 def fork_available() -> bool:
-    """Whether helpers can be forked here (Linux with the ``fork`` start method)."""
-    return sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
+    """Whether helpers can be forked here: Linux with the ``fork`` start method, called from the
+    main thread (another thread may hold a lock the fork would copy locked: a caller running
+    several atlases in threads), in a process that may have children (a ``multiprocessing``
+    pool's worker may not)."""
+    return (
+        sys.platform.startswith("linux")
+        and "fork" in multiprocessing.get_all_start_methods()
+        and threading.current_thread() is threading.main_thread()
+        and not multiprocessing.current_process().daemon
+    )
 
 
 def _helper_start(blas_threads: int) -> None:

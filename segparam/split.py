@@ -329,7 +329,12 @@ def _stop(pool) -> None:
 
 
 def _jobs(cfg: SplitConfig) -> int:
-    """Worker processes the config asks for (``n_jobs``; 0: one per CPU)."""
+    """Worker processes the config asks for (``n_jobs``; 0: one per CPU), or 1 in a daemonic
+    process (a ``multiprocessing`` pool's worker), which may not start any."""
+    import multiprocessing
+
+    if multiprocessing.current_process().daemon:
+        return 1
     return cfg.n_jobs or os.cpu_count() or 1
 
 

@@ -165,3 +165,41 @@ def test_the_split_stage_loads_the_solvers_kernels_before_forking():
         "assert p.kernels_loaded()\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True, timeout=300)
+
+
+def test_no_helpers_from_another_thread():
+    import threading
+
+    seen = []
+    thread = threading.Thread(target=lambda: seen.append(Helpers(4).jobs))
+    thread.start()
+    thread.join()
+    assert seen == [1]
+
+
+def _split_in_a_pool_worker():
+    sphere = trimesh.creation.icosphere(3)
+    V, F = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    labels = segment(V, F, seed=0).labels
+    charts = parameterize_charts(V, F, labels, config=SplitConfig(n_jobs=2)).charts
+    return [c.uv for c in charts], Helpers(2).jobs, split._jobs(SplitConfig(n_jobs=2))
+
+
+@needs_fork
+def test_a_multiprocessing_pool_worker_maps_its_charts_alone(monkeypatch):
+    """A pool's worker is daemonic and may not start processes: no helper, no worker, the same
+    charts (it used to fail with "daemonic processes are not allowed to have children")."""
+    import multiprocessing
+
+    monkeypatch.setattr(split, "PART_MIN_FACES", 100)  # the forked worker sees these too
+    monkeypatch.setattr(split, "FORK_MIN_FACES", 0)
+    monkeypatch.setattr(split, "PARALLEL_MIN_FACES", 500)  # and the spawned workers' path
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        uvs, helper_jobs, worker_jobs = pool.apply(_split_in_a_pool_worker)
+    assert helper_jobs == 1 and worker_jobs == 1
+    sphere = trimesh.creation.icosphere(3)
+    V, F = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    labels = segment(V, F, seed=0).labels
+    alone = parameterize_charts(V, F, labels, config=SplitConfig(n_jobs=1)).charts
+    assert len(uvs) == len(alone)
+    assert all(np.array_equal(a, c.uv) for a, c in zip(uvs, alone, strict=True))
