@@ -126,7 +126,9 @@ GAIN_MAX_FACES = 256
 #: was cut in two). The bisections kept on the 2k brain were of charts of 0.11-0.25, brain-20k's
 #: one of 0.11.
 GAIN_MIN_EXCESS = 0.02
-#: Smaller meshes are parameterized in this process: starting workers costs about a second.
+#: Meshes from this many faces up send whole charts to spawned workers; smaller ones are
+#: parameterized here, sharing their large batches with forked helpers (``_solve_batch``):
+#: starting a spawned worker costs about a second.
 PARALLEL_MIN_FACES = 100_000
 #: How long stopping the workers waits for the pool's manager thread to end (it takes
 #: milliseconds once the workers are terminated; the bound only keeps a stuck one from hanging).
