@@ -32,10 +32,15 @@ from concurrent.futures import ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
+from .linalg import blas_threads
+
 log = logging.getLogger(__name__)
 
-#: The BLAS thread limit of a helper process (kept for the process's life).
-_HELPER_BLAS_LIMIT: list = []
+#: The BLAS thread limit of a helper or worker process (kept for the process's life).
+_PROCESS_BLAS_LIMIT: list = []
+#: How long stopping a pool waits for its manager thread to end (it takes milliseconds once the
+#: processes are terminated; the bound only keeps a stuck one from hanging).
+STOP_JOIN_SECONDS = 10.0
 #: At most this many helpers, whatever the machine: each fork costs ~15 ms here and the parts
 #: of a batch of the meshes helped (under 100k faces) get small past four (measured on 2 cores
 #: only, i.e. one helper).
@@ -63,9 +68,33 @@ def _helper_start(blas_threads: int) -> None:
     parameterize stage 24.6-26.0 s against 18.0-18.3 s; BENCHMARKS.md section 0.1, session 9).
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    limit_blas(blas_threads)
+
+
+def limit_blas(n: int) -> None:
+    """Limit this process's BLAS to ``n`` threads for the rest of its life (a helper's or a
+    spawned worker's start: each gets its share of the cores)."""
     from threadpoolctl import threadpool_limits
 
-    _HELPER_BLAS_LIMIT.append(threadpool_limits(blas_threads, user_api="blas"))
+    _PROCESS_BLAS_LIMIT.append(threadpool_limits(n, user_api="blas"))
+
+
+def stop_pool(pool: ProcessPoolExecutor) -> None:
+    """Cancel what has not started and end the pool's processes now (they ignore Ctrl-C), then
+    wait for them and for the pool's manager thread."""
+    # taken before shutdown, which forgets them
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    manager = getattr(pool, "_executor_manager_thread", None)
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.terminate()
+    for process in processes:
+        process.join(timeout=STOP_JOIN_SECONDS)
+    # The pool's manager thread closes its wake-up pipe as it ends; Python 3.11's exit hook
+    # writes to that pipe unlocked, and printed a traceback (EBADF) when the two raced: a
+    # Ctrl-C while the workers were still starting. Let it end first.
+    if manager is not None:
+        manager.join(timeout=STOP_JOIN_SECONDS)
 
 
 class Helpers:
@@ -128,7 +157,7 @@ class Helpers:
         pool = self.start()._pool
         futures = [pool.submit(fn, *args) for args in parts[1:]]
         try:
-            with _blas_threads(max(1, (os.cpu_count() or 1) // self.jobs)):
+            with blas_threads(max(1, (os.cpu_count() or 1) // self.jobs)):
                 first = fn(*parts[0])
         except Exception:
             wait(futures)
@@ -154,17 +183,6 @@ class Helpers:
         if pool is None:
             return
         if now:
-            processes = list((getattr(pool, "_processes", None) or {}).values())
-            pool.shutdown(wait=False, cancel_futures=True)
-            for process in processes:
-                process.terminate()
-                process.join()
+            stop_pool(pool)
         else:
             pool.shutdown(wait=False)
-
-
-def _blas_threads(n: int):
-    """This process's BLAS limited to ``n`` threads while its part runs next to the helpers'."""
-    from .linalg import _blas_controller
-
-    return _blas_controller().limit(limits=n, user_api="blas")

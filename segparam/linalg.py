@@ -57,14 +57,19 @@ def lowest_pairs(A: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     return w[:k], v[:, :k]
 
 
-def one_blas_thread() -> AbstractContextManager:
-    """A context in which the BLAS libraries loaded so far run on one thread.
+def blas_threads(n: int) -> AbstractContextManager:
+    """A context in which the BLAS libraries loaded so far run on at most ``n`` threads.
 
-    For the stages' many small dense problems, where threads only add overhead. The libraries
-    are looked up once per process (``threadpool_limits`` looks them up on every call: 0.9 ms of
-    CPU each, tens of calls per atlas); entering the context then costs 0.03 ms.
+    The libraries are looked up once per process (``threadpool_limits`` looks them up on every
+    call: 0.9 ms of CPU each, tens of calls per atlas); entering the context then costs 0.03 ms.
     """
-    return _blas_controller().limit(limits=1, user_api="blas")
+    return _blas_controller().limit(limits=n, user_api="blas")
+
+
+def one_blas_thread() -> AbstractContextManager:
+    """:func:`blas_threads` (1): for the stages' many small dense problems, where threads only
+    add overhead."""
+    return blas_threads(1)
 
 
 def spd_solver(A: sp.spmatrix) -> Callable[[np.ndarray], np.ndarray]:

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .cores import Helpers
+from .cores import Helpers, limit_blas, stop_pool
 from .errors import InvalidMeshError, check_choice, check_int, check_number
 from .linalg import DENSE_LIMIT
 from .mesh import (
@@ -130,9 +130,6 @@ GAIN_MIN_EXCESS = 0.02
 #: parameterized here, sharing their large batches with forked helpers (``_solve_batch``):
 #: starting a spawned worker costs about a second.
 PARALLEL_MIN_FACES = 100_000
-#: How long stopping the workers waits for the pool's manager thread to end (it takes
-#: milliseconds once the workers are terminated; the bound only keeps a stuck one from hanging).
-STOP_JOIN_SECONDS = 10.0
 #: A chart is planar when no unit face normal differs from the first by more than this.
 PLANAR_TOL = 1e-9
 #: Charts of at most this many vertices that need the solver are solved together, as one
@@ -315,21 +312,6 @@ def _sigint_blocked():
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
-def _stop(pool) -> None:
-    """Cancel what has not started and end the workers now (they ignore Ctrl-C)."""
-    # taken before shutdown, which forgets them
-    processes = list((getattr(pool, "_processes", None) or {}).values())
-    manager = getattr(pool, "_executor_manager_thread", None)
-    pool.shutdown(wait=False, cancel_futures=True)
-    for process in processes:
-        process.terminate()
-    # The pool's manager thread closes its wake-up pipe as it ends; Python 3.11's exit hook
-    # writes to that pipe unlocked, and printed a traceback (EBADF) when the two raced: a
-    # Ctrl-C while the workers were still starting. Let it end first.
-    if manager is not None:
-        manager.join(timeout=STOP_JOIN_SECONDS)
-
-
 def _jobs(cfg: SplitConfig) -> int:
     """Worker processes the config asks for (``n_jobs``; 0: one per CPU), or 1 in a daemonic
     process (a ``multiprocessing`` pool's worker), which may not start any."""
@@ -338,10 +320,6 @@ def _jobs(cfg: SplitConfig) -> int:
     if multiprocessing.current_process().daemon:
         return 1
     return cfg.n_jobs or os.cpu_count() or 1
-
-
-#: The BLAS thread limit of each worker process (kept for the process's life).
-_WORKER_BLAS_LIMIT = []
 
 
 def _warm_worker(blas_threads: int = 1) -> None:
@@ -353,9 +331,7 @@ def _warm_worker(blas_threads: int = 1) -> None:
     busy threads, and the 1M-face brain's parameterize stage took 24.6-26.0 s against 18.0-18.3 s
     with one thread each (two runs each; BENCHMARKS.md section 0, session 9).
     """
-    from threadpoolctl import threadpool_limits
-
-    _WORKER_BLAS_LIMIT.append(threadpool_limits(blas_threads, user_api="blas"))
+    limit_blas(blas_threads)
     _solve_a_bent_grid()
 
 
@@ -407,7 +383,7 @@ def stop_workers(pool, *, now: bool = False) -> None:
     if pool is None:
         return
     if now:
-        _stop(pool)
+        stop_pool(pool)
     else:
         pool.shutdown()
 
@@ -485,82 +461,72 @@ def parameterize_charts(
     sources = [order[bounds[s] : bounds[s + 1]] for s in range(n_src)]
     sub = _submeshes(F, labels, order, bounds)
     jobs = _jobs(cfg)
+    affinity = _MeshAffinity(V, F, affinity)
     # Below PARALLEL_MIN_FACES the large solver batches are shared with forked helpers; above,
     # whole charts go to the spawned workers (which then have the cores).
     with Helpers(
         jobs if len(F) < PARALLEL_MIN_FACES else 1, prepare=_before_the_helpers
     ) as helpers:
-        return _parameterize(
-            V, F, n_src, sources, order, bounds, sub, cfg, seed, size, jobs, progress,
-            _MeshAffinity(V, F, affinity), workers, helpers,
-        )  # fmt: skip
+        # Small charts, all at once: already in mesh indices and units.
+        bulk_rejected, bulk_bijective = np.zeros(n_src, dtype=bool), np.zeros(n_src, dtype=bool)
+        final = _bulk_charts(
+            V, F, sub, order, bounds, cfg, size, bulk_rejected, bulk_bijective, helpers=helpers
+        )
+        if progress is not None and final:
+            progress(len(final))
+        in_bulk = np.zeros(n_src, dtype=bool)
+        in_bulk[list(final)] = True
+        rest = np.flatnonzero(~in_bulk).tolist()  # the charts that need the solver alone
+        parallel = jobs > 1 and len(rest) > 1 and len(F) >= PARALLEL_MIN_FACES
 
+        def task(src: int) -> tuple:
+            """The arguments of :func:`_solve_source` for chart ``src`` (before ``cfg, seed``).
 
-def _parameterize(
-    V, F, n_src, sources, order, bounds, sub, cfg, seed, size, jobs, progress, affinity, workers,
-    helpers,
-):  # fmt: skip
-    """:func:`parameterize_charts` once its input is checked, ``V`` in the unit frame."""
-    # Small charts, all at once: already in mesh indices and units.
-    bulk_rejected, bulk_bijective = np.zeros(n_src, dtype=bool), np.zeros(n_src, dtype=bool)
-    final = _bulk_charts(
-        V, F, sub, order, bounds, cfg, size, bulk_rejected, bulk_bijective, helpers=helpers
-    )
-    if progress is not None and final:
-        progress(len(final))
-    in_bulk = np.zeros(n_src, dtype=bool)
-    in_bulk[list(final)] = True
-    rest = np.flatnonzero(~in_bulk).tolist()  # the charts that need the solver alone
-    parallel = jobs > 1 and len(rest) > 1 and len(F) >= PARALLEL_MIN_FACES
+            A worker process cannot reach the mesh: it gets the chart's affinity at once.
+            """
+            faces = sources[src]
+            vertices, local_F = sub.of(src)
+            return V[vertices], local_F, affinity.of_chart(faces, now=parallel), src
 
-    def task(src: int) -> tuple:
-        """The arguments of :func:`_solve_source` for chart ``src`` (before ``cfg, seed``).
+        results: dict[int, tuple[list[Chart], bool]] = {}
+        if parallel:
+            from concurrent.futures import as_completed
 
-        A worker process cannot reach the mesh: it gets the chart's affinity at once.
-        """
-        faces = sources[src]
-        vertices, local_F = sub.of(src)
-        return V[vertices], local_F, affinity.of_chart(faces, now=parallel), src
+            by_size = sorted(rest, key=lambda s: -len(sources[s]))  # big ones first
+            pool = workers if workers is not None else _new_pool(min(jobs, len(rest)))
+            try:
+                # Ctrl-C goes to the whole process group. The workers start (and live) with SIGINT
+                # blocked, a mask they inherit, so only this process sees it and stops them: no
+                # traceback from a worker that was still importing.
+                with _sigint_blocked():
+                    futures = {pool.submit(_solve_source, *task(s), cfg, seed): s for s in by_size}
+                for done, future in enumerate(as_completed(futures), len(final) + 1):
+                    results[futures[future]] = future.result()
+                    if progress is not None:
+                        progress(done)
+            except BaseException:
+                stop_pool(pool)
+                raise
+            if workers is None:
+                pool.shutdown()
+        else:
+            results = _solve_in_rounds(
+                V, F, rest, sources, sub, affinity, cfg, seed, size, bulk_rejected, bulk_bijective,
+                progress, len(final), helpers,
+            )  # fmt: skip
 
-    results: dict[int, tuple[list[Chart], bool]] = {}
-    if parallel:
-        from concurrent.futures import as_completed
-
-        by_size = sorted(rest, key=lambda s: -len(sources[s]))  # big ones first
-        pool = workers if workers is not None else _new_pool(min(jobs, len(rest)))
-        try:
-            # Ctrl-C goes to the whole process group. The workers start (and live) with SIGINT
-            # blocked, a mask they inherit, so only this process sees it and stops them: no
-            # traceback from a worker that was still importing.
-            with _sigint_blocked():
-                futures = {pool.submit(_solve_source, *task(s), cfg, seed): s for s in by_size}
-            for done, future in enumerate(as_completed(futures), len(final) + 1):
-                results[futures[future]] = future.result()
-                if progress is not None:
-                    progress(done)
-        except BaseException:
-            _stop(pool)
-            raise
-        if workers is None:
-            pool.shutdown()
-    else:
-        results = _solve_in_rounds(
-            V, F, rest, sources, sub, affinity, cfg, seed, size, bulk_rejected, bulk_bijective,
-            progress, len(final), helpers,
-        )  # fmt: skip
-
-    for src in rest:
-        pieces, first = results[src]
-        final[src] = (_in_mesh(pieces, sources[src], sub.of(src)[0], size), first)
-    charts: list[Chart] = []
-    first_pass = np.zeros(n_src, dtype=bool)
-    for src in range(n_src):
-        pieces, first_pass[src] = final[src]
-        charts.extend(pieces)
-    if cfg.min_split_gain is not None:
-        charts = _split_for_gain(V, F, charts, cfg, seed, size, affinity, helpers)
-    splits = np.bincount([c.source for c in charts], minlength=n_src) - 1
-    return ChartSet(charts=tuple(charts), splits=splits, first_pass_bijective=first_pass)
+        for src in rest:
+            pieces, first = results[src]
+            final[src] = (_in_mesh(pieces, sources[src], sub.of(src)[0], size), first)
+        charts: list[Chart] = []
+        first_pass = np.zeros(n_src, dtype=bool)
+        for src in range(n_src):
+            pieces, first_pass[src] = final[src]
+            charts.extend(pieces)
+        if cfg.min_split_gain is not None:
+            charts = _split_for_gain(V, F, charts, cfg, seed, size, affinity, helpers)
+        splits = np.bincount([c.source for c in charts], minlength=n_src) - 1
+        return ChartSet(charts=tuple(charts), splits=splits, first_pass_bijective=first_pass)
 
 
 def _excess(charts: list[Chart], area: np.ndarray, *, own: bool = False) -> np.ndarray:
@@ -764,6 +730,19 @@ PART_MIN_FACES = 700
 FORK_MIN_FACES = 4_000
 
 
+def _shares(helpers: Helpers | None, n_items: int, n_faces: int) -> int:
+    """Into how many processes' shares to cut work of ``n_items`` charts or pieces and
+    ``n_faces`` faces: up to ``helpers.jobs``, each share at least one item and
+    ``PART_MIN_FACES`` faces, and 1 while the helpers are not started unless the work has
+    ``FORK_MIN_FACES`` faces (1 without helpers)."""
+    if helpers is None:
+        return 1
+    jobs = min(helpers.jobs, n_items, n_faces // PART_MIN_FACES)
+    if jobs > 1 and not helpers.started and n_faces < FORK_MIN_FACES:
+        return 1
+    return jobs
+
+
 def _solve_batch(
     V: np.ndarray,
     F: np.ndarray,
@@ -780,9 +759,7 @@ def _solve_batch(
     for bit."""
     n_charts = int(vert_chart[-1]) + 1
     face_chart = vert_chart[F[:, 0]]
-    jobs = 1 if helpers is None else min(helpers.jobs, len(F) // PART_MIN_FACES, n_charts)
-    if jobs > 1 and not helpers.started and len(F) < FORK_MIN_FACES:
-        jobs = 1
+    jobs = _shares(helpers, n_charts, len(F))
     kwargs = {"tangent": cfg.tangent, "refine": cfg.refine, "angle_weight": cfg.angle_weight}
     if jobs <= 1:
         return solve_charts(V, F, vert_chart, slim_below=slim_below, **kwargs)
@@ -1180,11 +1157,7 @@ def _try_pieces(tasks: list[tuple], cfg: SplitConfig, seed: int, helpers: Helper
     the pieces are dealt to the processes largest first, each to the least loaded (faces), and
     solved side by side: each piece's result is its own, whichever process solves it."""
     sizes = np.array([len(t[2]) for t in tasks], dtype=np.int64)
-    jobs = (
-        1 if helpers is None else min(helpers.jobs, len(tasks), int(sizes.sum()) // PART_MIN_FACES)
-    )
-    if jobs > 1 and not helpers.started and sizes.sum() < FORK_MIN_FACES:
-        jobs = 1
+    jobs = _shares(helpers, len(tasks), int(sizes.sum()))
     if jobs <= 1:
         return _try_all(tasks, cfg=cfg, seed=seed)
     load, owner = np.zeros(jobs, dtype=np.int64), np.empty(len(tasks), dtype=np.int64)
