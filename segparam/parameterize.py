@@ -1043,9 +1043,10 @@ def _arap(
             return uv, step
         previous = energy
         if solve is None:
-            L = (D.T @ sp.diags(w) @ D).tocsc()
+            DT = D.T  # once: a transpose is a new matrix object each time
+            L = (DT @ sp.diags(w) @ D).tocsc()
             solve = spd_solver(L[free][:, free])
-        rhs = D.T @ (w[:, None] * Rt.reshape(-1, 2))
+        rhs = DT @ (w[:, None] * Rt.reshape(-1, 2))
         uv = np.zeros_like(uv)
         uv[free] = solve(rhs[free])
     raise AssertionError("unreachable")  # pragma: no cover
@@ -1655,9 +1656,10 @@ def _arap_charts(
             break
         previous = np.where(active, energy, previous)
         if solve is None:
-            L = (D.T @ sp.diags(w) @ D).tocsc()
+            DT = D.T  # once: a transpose is a new matrix object each time
+            L = (DT @ sp.diags(w) @ D).tocsc()
             solve = spd_solver(L[free][:, free])
-        rhs = D.T @ (w[:, None] * Rt.reshape(-1, 2))
+        rhs = DT @ (w[:, None] * Rt.reshape(-1, 2))
         new = np.zeros_like(uv)
         new[free] = solve(rhs[free])
         move = active[vert_chart]

@@ -250,7 +250,7 @@ def slim_refine(
     area = face_areas(V, F)
     total = np.bincount(fc, weights=area, minlength=n_charts)
     total = np.where(total > 0, total, 1.0)
-    D = _gradient_rows(F, frames, n)
+    DT = _gradient_rows(F, frames, n).T  # once: a transpose is a new matrix object each time
     g3 = _gradient_coefficients(frames)  # (m, 2, 3)
     local = np.einsum("mki,mkj->mij", g3, g3)  # sum_k g_k g_k^T: the triangle's stiffness
     # each face's weight: its chart's (a quarter of it on charts of few faces)
@@ -285,7 +285,7 @@ def slim_refine(
         J = jacobians(V, F[faces], uv, frames[faces])
         W2 = _slim_weights(J)
         g = _energy_gradients(J, weight[faces]) * area[faces][:, None, None]
-        grad = np.concatenate([_scatter_rows(D, faces, g[:, i, :]) for i in range(2)])
+        grad = np.concatenate([_scatter_rows(DT, faces, g[:, i, :]) for i in range(2)])
         move = active[vc] & ~pin
         if system is None or move.sum() < SYSTEM_REUSE * system.size:
             system = _ProxySystem(F, faces, n, stiffness)
@@ -455,12 +455,13 @@ class _ProxySystem:
         return out
 
 
-def _scatter_rows(D: sp.csr_matrix, faces: np.ndarray, g: np.ndarray) -> np.ndarray:
-    """``D^T`` applied to per-triangle row vectors ``g`` (``(k, 2)``: one uv coordinate's
-    ``d/dJ`` row of each triangle in ``faces``): the gradient over the vertex values."""
-    out = np.zeros(2 * (D.shape[0] // 2))
+def _scatter_rows(DT: sp.csc_matrix, faces: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """``D^T`` (given as ``DT``) applied to per-triangle row vectors ``g`` (``(k, 2)``: one uv
+    coordinate's ``d/dJ`` row of each triangle in ``faces``): the gradient over the vertex
+    values."""
+    out = np.zeros(2 * (DT.shape[1] // 2))
     out[(2 * faces[:, None] + np.arange(2)).ravel()] = g.ravel()
-    return D.T @ out
+    return DT @ out
 
 
 def _gradient_coefficients(frames: np.ndarray) -> np.ndarray:
