@@ -115,9 +115,13 @@ _RULE_CODES = {"rest": canvas.REST, "holes": canvas.HOLES}
 # still places every chart and reports the height it needed (the next guess of the scale).
 _HEADROOM = 2
 # Scale search (`pack_charts`), a safeguarded secant search on the one global scale:
-# - the first guess, as a fraction of the bound `_scale_bounds` (at the area bound the charts
-#   would have to fill the whole square, which no layout of footprints does);
+# - the first guess, as a fraction of the area bound of `_scale_bounds` (at the area bound the
+#   charts would have to fill the whole square, which no layout of footprints does), or this
+#   fraction under the side bound if that is smaller: the longest chart's box then spans the
+#   texture's width less a thousandth of a texel at 1024 (the side bound itself is one texel too
+#   wide: a box of ``floor(w + 2 * _MARGIN) + 1`` texels);
 _FIRST_GUESS = 0.88
+_UNDER_SIDE = 1e-6
 # - with many charts (at least _MODEL_CHARTS) the first guess is the scale at which the charts,
 #   each a square of its area grown by padding + 1 texels, would fill _MODEL_FILL of the texture
 #   (`_first_scale`): on 8 sets of 569-4,000 triangles and sphere pieces it was within 2% of the
@@ -574,23 +578,33 @@ def _outlines(G: np.ndarray, fchart: np.ndarray, voff: np.ndarray, ok: np.ndarra
 
 
 def _box(extent: np.ndarray, s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Footprint box size (texels, integers) and the chart's offset that centres it."""
+    """Footprint box size (texels, integers) and the chart's offset that centres it (one
+    extent ``(2,)`` or many ``(n, 2)``)."""
     w = extent * s
     n = np.floor(w + 2 * _MARGIN).astype(np.int64) + 1
     return n, (n - w) / 2
 
 
+def _turns(k: np.ndarray, cols: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) affines of ``k`` counter-clockwise quarter turns of the boxes [0, cols] x
+    [0, rows] (one per chart)."""
+    k = np.asarray(k) % 4
+    T = np.zeros((len(k), 3, 3))
+    T[:, 2, 2] = 1.0
+    c, r = np.asarray(cols, dtype=np.float64), np.asarray(rows, dtype=np.float64)
+    # k = 0: the identity; 1: (x, y) -> (rows - y, x); 2: (cols - x, rows - y); 3: (y, cols - x)
+    T[:, 0, 0] = np.select([k == 0, k == 2], [1.0, -1.0], 0.0)
+    T[:, 1, 1] = T[:, 0, 0]
+    T[:, 0, 1] = np.select([k == 1, k == 3], [-1.0, 1.0], 0.0)
+    T[:, 1, 0] = -T[:, 0, 1]
+    T[:, 0, 2] = np.select([k == 1, k == 2], [r, c], 0.0)
+    T[:, 1, 2] = np.select([k == 2, k == 3], [r, c], 0.0)
+    return T
+
+
 def _turn(k: int, cols: int, rows: int) -> np.ndarray:
     """(3, 3) affine of k counter-clockwise quarter turns of the box [0, cols] x [0, rows]."""
-    k %= 4
-    T = np.eye(3)
-    if k == 1:
-        T[:2] = [[0, -1, rows], [1, 0, 0]]
-    elif k == 2:
-        T[:2] = [[-1, 0, cols], [0, -1, rows]]
-    elif k == 3:
-        T[:2] = [[0, 1, 0], [-1, 0, cols]]
-    return T
+    return _turns(np.array([k]), np.array([cols]), np.array([rows]))[0]
 
 
 class _Angles:
@@ -647,14 +661,21 @@ class _Angles:
             self._canvases[key] = canvas.new_canvas(resolution, height, padding, block)
         return self._canvases[key]
 
-    def to_texels(self, i: int, a: int, k: int, s: float) -> np.ndarray:
-        """(3, 3) affine from chart i's q to its footprint's texels: angle a, k quarter turns."""
-        e = int(self.entry_ptr[i]) + a
+    def to_texels(self, a: np.ndarray, k: np.ndarray, s: float) -> np.ndarray:
+        """(n, 3, 3) affines from every chart's q to its footprint's texels: chart i at angle
+        ``a[i]`` and ``k[i]`` quarter turns."""
+        e = self.entry_ptr[:-1] + a
         n, off = _box(self.ext[e], s)
-        to_tex = np.eye(3)
-        to_tex[:2, :2] = s * self.rot[e]
-        to_tex[:2, 2] = off - s * self.low[e]
-        return _turn(k, int(n[0]), int(n[1])) @ to_tex
+        to_tex = np.zeros((len(e), 3, 3))
+        to_tex[:, :2, :2] = s * self.rot[e]
+        to_tex[:, :2, 2] = off - s * self.low[e]
+        to_tex[:, 2, 2] = 1.0
+        return _turns(k, n[:, 0], n[:, 1]) @ to_tex
+
+
+#: A layout: per chart (input order), the affine from its q to its footprint's texels (n, 3, 3),
+#: and the footprint's row and column in the texture (n,) each.
+_Placed = tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 def _raster_trial(
@@ -666,7 +687,7 @@ def _raster_trial(
     turns: int,
     rule: str,
     angles: _Angles,
-) -> tuple[list[tuple[np.ndarray, int, int]] | None, float, int | None]:
+) -> tuple[_Placed | None, float, int | None]:
     """Place all charts at scale s on a canvas half again as tall as the texture, by one rule.
 
     The "rest" rule tries every angle of `angles` (fine steps for the charts that are not
@@ -675,8 +696,8 @@ def _raster_trial(
 
     Returns
     -------
-    placed : list of (q -> footprint texel affine, row, col), or None
-        None if a chart found no room even on the taller canvas.
+    placed : ((n, 3, 3) q -> footprint texel affines, (n,) rows, (n,) columns), or None
+        Per chart, in input order; None if a chart found no room even on the taller canvas.
     fraction : float
         Fraction of the total area placed.
     need : int or None
@@ -695,10 +716,8 @@ def _raster_trial(
     if n_placed < len(order):
         done = sum(charts[i].area for i in order[:n_placed])
         return None, done / sum(ch.area for ch in charts), None
-    placed: list = [None] * len(charts)
-    for i, (a, k, row, col, _rows, _cols) in enumerate(result.tolist()):  # loop over charts
-        placed[i] = (angles.to_texels(i, a, k, s), row, col)
-    return placed, 1.0, int(need)
+    a, k, row, col = result[:, 0], result[:, 1], result[:, 2], result[:, 3]
+    return (angles.to_texels(a, k, s), row, col), 1.0, int(need)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -714,7 +733,7 @@ def _rect_trial(
     turns: int,
     rule: str = "boxes",
     angles: _Angles | None = None,
-) -> tuple[list[tuple[np.ndarray, int, int]] | None, float, int | None]:
+) -> tuple[_Placed | None, float, int | None]:
     """Pack the padded footprint boxes at scale s with rectpack's MaxRects.
 
     Boxes are ``(cols + padding, rows + padding)`` in a bin of side ``resolution - padding``
@@ -749,15 +768,15 @@ def _rect_trial(
         if len(rects) != len(charts):
             done = max(done, sum(charts[r[5]].area for r in rects))
             continue
-        placed: list = [None] * len(charts)
-        for _, x, y, w, _h, rid in rects:
-            n, off = _box(charts[rid].extent, s)
-            to_tex = np.diag([s, s, 1.0])
-            to_tex[:2, 2] = off
-            if w != boxes[rid][0]:  # rectpack turned the box
-                to_tex = _turn(1, int(n[0]), int(n[1])) @ to_tex
-            placed[rid] = (to_tex, int(y) + padding, int(x) + padding)
-        return placed, 1.0, None
+        rid = np.array([r[5] for r in rects])
+        x, y, w = (np.array([r[k] for r in rects])[np.argsort(rid)] for k in (1, 2, 3))
+        n, off = _box(np.array([ch.extent for ch in charts]), s)
+        to_tex = np.zeros((len(charts), 3, 3))
+        to_tex[:, [0, 1, 2], [0, 1, 2]] = [s, s, 1.0]
+        to_tex[:, :2, 2] = off
+        turned = w != np.array(boxes)[:, 0]  # rectpack turned the box
+        to_tex = _turns(turned.astype(np.int64), n[:, 0], n[:, 1]) @ to_tex
+        return (to_tex, y + padding, x + padding), 1.0, None
     return None, done / total, None
 
 
@@ -765,21 +784,28 @@ def _rect_trial(
 # driver
 
 
-def _scale_bounds(charts: list[_Chart], resolution: int, padding: int) -> float:
+def _scale_bounds(charts: list[_Chart], resolution: int, padding: int) -> tuple[float, float]:
+    """Two bounds on the scale: at ``by_area`` the charts' area fills the whole square inside the
+    border (no layout of footprints does); above ``by_side`` the longest chart's box is wider
+    than that square. No scale above the smaller fits."""
     inner = resolution - 2 * padding
     total = sum(ch.area for ch in charts)
     longest = max(float(ch.extent.max()) for ch in charts)
     by_area = inner / np.sqrt(total)
     by_side = max(inner - 2 * _MARGIN, 1e-9) / longest
-    return float(min(by_area, by_side))
+    return float(by_area), float(by_side)
 
 
-def _first_scale(charts: list[_Chart], resolution: int, padding: int, hi: float) -> float:
-    """The scale search's first guess: `_FIRST_GUESS` of the bound `hi`, or for `_MODEL_CHARTS`
-    charts or more the scale ``s`` at which squares of side ``sqrt(area) s + padding + 1`` (one
-    per chart) cover `_MODEL_FILL` of the area inside the border (the root of a quadratic in
-    ``s``), if that is smaller."""
-    first = _FIRST_GUESS * hi
+def _first_scale(
+    charts: list[_Chart], resolution: int, padding: int, by_area: float, by_side: float
+) -> float:
+    """The scale search's first guess: `_FIRST_GUESS` of the area bound, or just under the side
+    bound if that is smaller (a chart as long as the texture: the sheet of ``bench_atlas.py``
+    ends at 0.996 of it, where 0.88 of the bound took the search six trials to get there); for
+    `_MODEL_CHARTS` charts or more the scale ``s`` at which squares of side ``sqrt(area) s +
+    padding + 1`` (one per chart) cover `_MODEL_FILL` of the area inside the border (the root
+    of a quadratic in ``s``), if that is smaller."""
+    first = min(_FIRST_GUESS * by_area, by_side * (1 - _UNDER_SIDE))
     if len(charts) < _MODEL_CHARTS:
         return first
     area = np.array([ch.area for ch in charts])
@@ -792,8 +818,8 @@ def _first_scale(charts: list[_Chart], resolution: int, padding: int, hi: float)
 
 
 def _best_run(
-    runs: list[tuple[list | None, float, int | None]], resolution: int
-) -> tuple[list | None, float, int | None]:
+    runs: list[tuple[_Placed | None, float, int | None]], resolution: int
+) -> tuple[_Placed | None, float, int | None]:
     """Combine the placement rules' trials at one scale: (placed, fraction, need).
 
     The fitting layout that needs the least height wins (ties: the first rule); `need` is the
@@ -854,7 +880,9 @@ def _limited(
     return _prepare(uvs, faces, areas3d * shrink**2)
 
 
-def _one_trial(charts: list[_Chart], s: float, G: int, p: int, cfg: PackConfig) -> list | None:
+def _one_trial(
+    charts: list[_Chart], s: float, G: int, p: int, cfg: PackConfig
+) -> _Placed | None:
     """The placement rules once at scale ``s`` on a ``G`` texture: the layout, or None."""
     trial, rules, order, turns, oriented = _trial_setup(charts, cfg)
     if max(float(ch.extent.max()) for ch in charts) * s + 2 * _MARGIN > G - 2 * p:
@@ -972,9 +1000,10 @@ def pack_charts(
     # scale above `hi` fits. Every trial runs the placement rules side by side (one thread each:
     # the compiled trials release the GIL); its outcome narrows the bracket and predicts the next
     # scale, until the stop rule holds.
-    hi = _scale_bounds(charts, G, p)
+    by_area, by_side = _scale_bounds(charts, G, p)
+    hi = min(by_area, by_side)
     lo, best = 0.0, None
-    s = _first_scale(charts, G, p, hi)
+    s = _first_scale(charts, G, p, by_area, by_side)
     n_trials = 0
     with ThreadPoolExecutor(max_workers=min(len(rules), os.cpu_count() or 1)) as pool:
         for n_trials in range(1, _MAX_SHRINK + 1):
@@ -1002,7 +1031,7 @@ def pack_charts(
 
 def _trial_at_scale(
     pool: ThreadPoolExecutor, setup: tuple, charts: list[_Chart], s: float, G: int, p: int, k: int
-) -> tuple[list | None, float, int | None]:
+) -> tuple[_Placed | None, float, int | None]:
     """Trial `k` of the search: every placement rule of `setup` (:func:`_trial_setup`) at scale
     `s`, side by side on `pool`, combined by :func:`_best_run` into (placed, fraction, need)."""
     trial, rules, order, turns, oriented = setup
@@ -1068,24 +1097,25 @@ def _next_scale(
 
 def _finish(
     charts: list[_Chart],
-    placed: list[tuple[np.ndarray, int, int]],
+    placed: _Placed,
     s: float,
     G: int,
     p: int,
     n_trials: int,
     method: str,
 ) -> PackResult:
-    out_uvs = []
+    to_tex, row, col = placed
+    M = to_tex @ np.stack([ch.to_q for ch in charts])
+    M[:, :2, 2] += np.column_stack([col, row])
+    M[:, :2] /= G
     transforms = np.empty((len(charts), 2, 3))
-    area = 0.0
-    for ch, (to_tex, row, col) in zip(charts, placed, strict=True):
-        M = to_tex @ ch.to_q
-        M[:2, 2] += (col, row)
-        M[:2] /= G
-        transforms[ch.index] = M[:2]
-        uv = ch.uv @ M[:2, :2].T + M[:2, 2]
-        out_uvs.append(uv)
-        area += float(np.abs(signed_areas(uv, ch.F)).sum())
+    transforms[[ch.index for ch in charts]] = M[:, :2]
+    # loop over charts: one small product each (the same arithmetic, bit for bit, as ever)
+    out_uvs = [ch.uv @ m[:2, :2].T + m[:2, 2] for ch, m in zip(charts, M, strict=True)]
+    nv = np.array([len(ch.uv) for ch in charts])
+    offset = np.repeat(np.r_[0, np.cumsum(nv)[:-1]], [len(ch.F) for ch in charts])
+    faces = np.concatenate([ch.F for ch in charts]) + offset[:, None]
+    area = float(np.abs(signed_areas(np.concatenate(out_uvs), faces)).sum())
     logger.info(
         "packed %d charts (%s) at %dx%d, padding %d: utilization %.4f after %d trials",
         len(charts),

@@ -441,12 +441,12 @@ def test_many_charts_start_the_scale_search_near_its_answer(monkeypatch) -> None
     res = pack_charts(uvs, faces, areas)
     assert footprint_conflicts(res.uvs, faces, resolution=1024, padding=2) == 0
     final = res.scale * 1024
-    hi = pack._scale_bounds(pack._prepare(uvs, faces, areas), 1024, 2)
+    by_area, by_side = pack._scale_bounds(pack._prepare(uvs, faces, areas), 1024, 2)
+    assert by_area < by_side
     assert abs(tried[0] / final - 1) < 0.05
-    assert pack._FIRST_GUESS * hi / final > 1.10
-    assert pack._first_scale(pack._prepare(uvs[:50], faces[:50], areas[:50]), 1024, 2, hi) == (
-        pack._FIRST_GUESS * hi
-    )
+    assert pack._FIRST_GUESS * by_area / final > 1.10
+    few = pack._prepare(uvs[:50], faces[:50], areas[:50])
+    assert pack._first_scale(few, 1024, 2, by_area, by_side) == pack._FIRST_GUESS * by_area
 
 
 def test_long_thin_chart_and_wildly_different_areas() -> None:
