@@ -880,9 +880,7 @@ def _limited(
     return _prepare(uvs, faces, areas3d * shrink**2)
 
 
-def _one_trial(
-    charts: list[_Chart], s: float, G: int, p: int, cfg: PackConfig
-) -> _Placed | None:
+def _one_trial(charts: list[_Chart], s: float, G: int, p: int, cfg: PackConfig) -> _Placed | None:
     """The placement rules once at scale ``s`` on a ``G`` texture: the layout, or None."""
     trial, rules, order, turns, oriented = _trial_setup(charts, cfg)
     if max(float(ch.extent.max()) for ch in charts) * s + 2 * _MARGIN > G - 2 * p:
