@@ -407,6 +407,49 @@ def test_single_chart_fills_the_square() -> None:
     assert res.utilization > 0.9
 
 
+def test_a_chart_as_long_as_the_texture_packs_in_one_trial_at_its_full_width(monkeypatch) -> None:
+    """A 2:1 chart is bound by its length, not its area: the first trial is just under the side
+    bound, it fits, and the search stops there with the box spanning the texture's width (at
+    0.88 of the bound the search took six trials to come within 0.6% of it)."""
+    from segparam import pack
+
+    tried = []
+    real = pack._trial_at_scale
+    monkeypatch.setattr(pack, "_trial_at_scale", lambda *a: tried.append(a[3]) or real(*a))
+    uv, F = grid(8, 4)
+    res = pack_charts([rotate(uv, 0.3)], [F], [2.0], config=PackConfig(resolution=128))
+    assert_valid_layout(res, [F])
+    assert len(tried) == 1
+    u = res.uvs[0][:, 0] * 128
+    assert u.max() - u.min() > 124 - 1  # inner width 124, less the box's rounding
+    assert res.utilization > 0.45  # half the square, less the padding: 124 * 62 / 128^2 = 0.469
+
+
+def test_a_fit_that_fills_the_texture_is_followed_by_a_small_step(monkeypatch) -> None:
+    """With few charts, a first fit whose layout fills the texture's height is followed by a
+    trial ``_FULL_STEP`` larger, not by the bisection towards the area bound; here every larger
+    scale fails, and the first fit's layout is the answer."""
+    from segparam import pack
+
+    tried = []
+    real = pack._trial_at_scale
+
+    def trial(pool, setup, charts, s, G, p, k):
+        tried.append(s)
+        if len(tried) > 1:
+            return None, 0.9, G + 40  # every larger scale overflows
+        placed, _, _ = real(pool, setup, charts, s, G, p, k)
+        return placed, 1.0, G  # the first fit fills the texture
+
+    monkeypatch.setattr(pack, "_trial_at_scale", trial)
+    uvs = [rotate(grid(3, 2)[0], 0.2 * i) for i in range(5)]
+    faces = [grid(3, 2)[1]] * 5
+    res = pack_charts(uvs, faces, [1.0] * 5, config=PackConfig(resolution=256))
+    assert tried[1] == pytest.approx(tried[0] * (1 + pack._FULL_STEP))
+    assert res.scale * 256 == tried[0]
+    assert len(tried) <= 4
+
+
 def test_many_tiny_charts() -> None:
     rng = np.random.default_rng(3)
     uvs, faces, areas = [], [], []
