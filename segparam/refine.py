@@ -38,12 +38,15 @@ faces).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 from .linalg import FixedPattern
 from .mesh import edges, face_areas
-from .quality import inverse_frames, jacobians, singular_values, triangle_frames
+from .quality import inverse_frames, jacobians, triangle_frames
 
 __all__ = [
     "ANGLE_WEIGHT",
@@ -103,12 +106,6 @@ SMALL_CHART_ANGLE_FACES = 32
 SMALL_CHART_ANGLE_SCALE = 0.25
 
 
-def _segment_min(ids: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
-    out = np.full(n, np.inf)
-    np.minimum.at(out, ids, values)
-    return out
-
-
 def _energy_terms(J: np.ndarray, angle_weight: float | np.ndarray = 0.0) -> np.ndarray:
     """Per Jacobian, ``s1^2 + s2^2 + s1^-2 + s2^-2`` (``||J||_F^2 (1 + det^-2)``) plus
     ``angle_weight`` (one number or one per Jacobian) times the conformal term
@@ -118,25 +115,6 @@ def _energy_terms(J: np.ndarray, angle_weight: float | np.ndarray = 0.0) -> np.n
     good = det > 0
     inv = 1.0 / np.where(good, det, 1.0)
     return np.where(good, fro * (1.0 + inv**2) + angle_weight * (fro * inv - 2.0), np.inf)
-
-
-def _energy_gradients(J: np.ndarray, angle_weight: float | np.ndarray) -> np.ndarray:
-    """``d/dJ`` of :func:`_energy_terms` (``(m, 2, 2)``, det J > 0; ``angle_weight`` one number
-    or one per Jacobian): with ``C = d det / dJ``
-    (the cofactor matrix), ``2 J (1 + det^-2) - 2 ||J||^2 det^-3 C`` and, for the conformal term,
-    ``2 J / det - ||J||^2 det^-2 C``."""
-    det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
-    fro = (J**2).sum(axis=(1, 2))
-    C = np.stack(
-        [np.stack([J[:, 1, 1], -J[:, 1, 0]], 1), np.stack([-J[:, 0, 1], J[:, 0, 0]], 1)], 1
-    )
-    inv = (1.0 / det)[:, None, None]
-    fro = fro[:, None, None]
-    G = 2 * J * (1 + inv**2) - 2 * fro * inv**3 * C
-    w = np.asarray(angle_weight, dtype=np.float64)
-    if w.any():
-        G = G + (w[:, None, None] if w.ndim else w) * (2 * J * inv - fro * inv**2 * C)
-    return G
 
 
 def symmetric_dirichlet(
@@ -159,28 +137,115 @@ def symmetric_dirichlet(
     return float(area @ terms / area.sum())
 
 
-def _step_bound(uv: np.ndarray, d: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Per triangle, the smallest ``tau > 0`` where the signed area of ``uv + tau d`` is zero
-    (``inf`` if none): area(tau) = a + b tau + c tau^2 (Smith & Schaefer 2015, sec. 3.1)."""
-    p1, p2 = uv[F[:, 1]] - uv[F[:, 0]], uv[F[:, 2]] - uv[F[:, 0]]
-    q1, q2 = d[F[:, 1]] - d[F[:, 0]], d[F[:, 2]] - d[F[:, 0]]
+# ----------------------------------------------------------------------------------------------
+# one iteration's per-triangle arithmetic, compiled: a loop over the faces of the charts still
+# moving instead of ~40 numpy calls on small arrays (SLIM's time on the solver calls of brain-2k
+# and brain-20k 0.52 -> 0.33 s; the maps agree with the array forms to 3e-14, BENCHMARKS.md
+# section 0.1, session 12). ``frames[f]`` is the inverse frame of face ``f``
+# (:func:`segparam.quality.inverse_frames`), so ``J = [uv1 - uv0, uv2 - uv0] frames[f]``.
 
-    def cross(x, y):
-        return x[:, 0] * y[:, 1] - x[:, 1] * y[:, 0]
 
-    a = cross(p1, p2)
-    b = cross(p1, q2) + cross(q1, p2)
-    c = cross(q1, q2)
-    tau = np.full(len(F), np.inf)
-    with np.errstate(divide="ignore", invalid="ignore"):
+@njit(cache=True, nogil=True)
+def _jacobian(F, f, x, frames):  # pragma: no cover - compiled
+    """Face ``f``'s Jacobian ``(j00, j01, j10, j11)`` at the map ``x``."""
+    i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+    q00, q01 = x[i1, 0] - x[i0, 0], x[i2, 0] - x[i0, 0]
+    q10, q11 = x[i1, 1] - x[i0, 1], x[i2, 1] - x[i0, 1]
+    a, b, c, d = frames[f, 0, 0], frames[f, 0, 1], frames[f, 1, 0], frames[f, 1, 1]
+    return q00 * a + q01 * c, q00 * b + q01 * d, q10 * a + q11 * c, q10 * b + q11 * d
+
+
+@njit(cache=True, nogil=True)
+def _slim_terms(F, faces, x, frames, weight, area):  # pragma: no cover - compiled
+    """Per face of ``faces`` (every triangle positive): SLIM's weights ``W^T W`` and the area
+    times ``d/dJ`` of the energy term.
+
+    ``W^T W = U diag(w(s1)^2, w(s2)^2) U^T`` with SLIM's symmetric Dirichlet weights
+    ``w(s)^2 = (s + 1)(s^2 + 1) / s^3``, in closed form ``w2^2 I + (w1^2 - w2^2) u1 u1^T``,
+    ``u1`` the leading eigenvector of ``J J^T`` and ``s1, s2`` the singular values from the
+    conformal / anti-conformal split (:func:`segparam.quality.singular_values`). The gradient,
+    with ``C = d det / dJ`` (the cofactor matrix): ``2 J (1 + det^-2) - 2 ||J||^2 det^-3 C`` and,
+    for the conformal term times ``weight[f]``, ``2 J / det - ||J||^2 det^-2 C``.
+    """
+    k = len(faces)
+    W2 = np.empty((k, 2, 2))
+    g = np.empty((k, 2, 2))
+    for t in range(k):
+        f = faces[t]
+        j00, j01, j10, j11 = _jacobian(F, f, x, frames)
+        q = math.hypot(j00 + j11, j10 - j01)
+        r = math.hypot(j00 - j11, j01 + j10)
+        s1, s2 = (q + r) / 2, abs(q - r) / 2
+        w1 = (s1 + 1) * (s1 * s1 + 1) / (s1 * s1 * s1)
+        w2 = (s2 + 1) * (s2 * s2 + 1) / (s2 * s2 * s2)
+        theta = 0.5 * math.atan2(
+            2 * (j00 * j10 + j01 * j11), (j00 * j00 + j01 * j01) - (j10 * j10 + j11 * j11)
+        )
+        u0, u1 = math.cos(theta), math.sin(theta)
+        W2[t, 0, 0] = w2 + (w1 - w2) * u0 * u0
+        W2[t, 0, 1] = (w1 - w2) * u0 * u1
+        W2[t, 1, 0] = W2[t, 0, 1]
+        W2[t, 1, 1] = w2 + (w1 - w2) * u1 * u1
+        det = j00 * j11 - j01 * j10
+        fro = j00 * j00 + j01 * j01 + j10 * j10 + j11 * j11
+        inv = 1.0 / det
+        a, b = 2 * (1 + inv * inv), 2 * fro * inv * inv * inv  # the symmetric Dirichlet term
+        a2, b2 = 2 * inv, fro * inv * inv  # the conformal term
+        w, A = weight[f], area[f]
+        g[t, 0, 0] = (a * j00 - b * j11 + w * (a2 * j00 - b2 * j11)) * A
+        g[t, 0, 1] = (a * j01 + b * j10 + w * (a2 * j01 + b2 * j10)) * A
+        g[t, 1, 0] = (a * j10 + b * j01 + w * (a2 * j10 + b2 * j01)) * A
+        g[t, 1, 1] = (a * j11 - b * j00 + w * (a2 * j11 - b2 * j00)) * A
+    return W2, g
+
+
+@njit(cache=True, nogil=True)
+def _chart_energies(F, faces, x, frames, weight, area, fc, total):  # pragma: no cover
+    """Each chart's energy at the map ``x`` over the faces ``faces`` (the charts of none: 0):
+    the area-weighted :func:`_energy_terms` summed per chart and divided by ``total``, the
+    chart's area (``inf`` for a chart with a flipped or degenerate triangle)."""
+    out = np.zeros(len(total))
+    for t in range(len(faces)):
+        f = faces[t]
+        j00, j01, j10, j11 = _jacobian(F, f, x, frames)
+        det = j00 * j11 - j01 * j10
+        if det > 0:
+            fro = j00 * j00 + j01 * j01 + j10 * j10 + j11 * j11
+            inv = 1.0 / det
+            out[fc[f]] += area[f] * (fro * (1.0 + inv * inv) + weight[f] * (fro * inv - 2.0))
+        else:
+            out[fc[f]] = np.inf
+    return out / total
+
+
+@njit(cache=True, nogil=True)
+def _step_bounds(x, d, F, faces, fc, n_charts):  # pragma: no cover - compiled
+    """Per chart, the smallest ``tau > 0`` at which a triangle of ``faces`` reaches zero signed
+    area along ``x + tau d`` (``inf`` if none): area(tau) = a + b tau + c tau^2 (Smith &
+    Schaefer 2015, sec. 3.1), both roots in the cancellation-free form ``2a / (-b -+ root)``."""
+    tau = np.full(n_charts, np.inf)
+    for t in range(len(faces)):
+        f = faces[t]
+        i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+        p1x, p1y = x[i1, 0] - x[i0, 0], x[i1, 1] - x[i0, 1]
+        p2x, p2y = x[i2, 0] - x[i0, 0], x[i2, 1] - x[i0, 1]
+        q1x, q1y = d[i1, 0] - d[i0, 0], d[i1, 1] - d[i0, 1]
+        q2x, q2y = d[i2, 0] - d[i0, 0], d[i2, 1] - d[i0, 1]
+        a = p1x * p2y - p1y * p2x
+        b = (p1x * q2y - p1y * q2x) + (q1x * p2y - q1y * p2x)
+        c = q1x * q2y - q1y * q2x
+        best = tau[fc[f]]
         disc = b * b - 4 * a * c
-        root = np.sqrt(np.maximum(disc, 0.0))
-        # both roots in a cancellation-free form: t = 2a / (-b -+ root)
-        for t in (2 * a / (-b - root), 2 * a / (-b + root)):
-            ok = (disc >= 0) & np.isfinite(t) & (t > 0)
-            tau = np.where(ok, np.minimum(tau, t), tau)
-        linear = (np.abs(c) <= 1e-14 * np.abs(b) ** 2 / np.maximum(np.abs(a), 1e-300)) & (b < 0)
-        tau = np.where(linear, np.minimum(tau, -a / b), tau)
+        if disc >= 0:
+            root = math.sqrt(disc)
+            for den in (-b - root, -b + root):
+                if den != 0:
+                    r = 2 * a / den
+                    if 0 < r < best:
+                        best = r
+        if b < 0 and abs(c) <= 1e-14 * b * b / max(abs(a), 1e-300):  # linear: a + b tau
+            best = min(best, -a / b)
+        tau[fc[f]] = best
     return tau
 
 
@@ -245,8 +310,10 @@ def slim_refine(
     uv = np.array(uv, dtype=np.float64)
     n = len(V)
     vc = np.zeros(n, dtype=np.int64) if vert_chart is None else np.asarray(vert_chart, np.int64)
+    F = np.asarray(F, dtype=np.int64)
     fc = vc[F[:, 0]]
     frames = inverse_frames(triangle_frames(V, F)) if inv_frames is None else inv_frames
+    frames = np.ascontiguousarray(frames, dtype=np.float64)
     area = face_areas(V, F)
     total = np.bincount(fc, weights=area, minlength=n_charts)
     total = np.where(total > 0, total, 1.0)
@@ -257,16 +324,12 @@ def slim_refine(
     few = np.bincount(fc, minlength=n_charts)[fc] < SMALL_CHART_ANGLE_FACES
     weight = angle_weight * np.where(few, SMALL_CHART_ANGLE_SCALE, 1.0)
 
-    def energy(x: np.ndarray, faces: np.ndarray | None = None) -> np.ndarray:
-        """Each chart's energy at the map ``x``; only the charts of ``faces`` (all of their
-        faces, in order) when given, the others 0."""
-        if faces is None:
-            e = area * _energy_terms(jacobians(V, F, x, frames), weight)
-            return np.bincount(fc, weights=e, minlength=n_charts) / total
-        e = area[faces] * _energy_terms(jacobians(V, F[faces], x, frames[faces]), weight[faces])
-        return np.bincount(fc[faces], weights=e, minlength=n_charts) / total
+    def energy(x: np.ndarray, faces: np.ndarray) -> np.ndarray:
+        """Each chart's energy at the map ``x``: the charts of ``faces`` (all of their faces),
+        the others 0."""
+        return _chart_energies(F, faces, x, frames, weight, area, fc, total)
 
-    E = energy(uv)
+    E = energy(uv, np.arange(len(F)))
     active = np.isfinite(E) & (E - 4.0 > SLIM_FLOOR)
     if charts is not None:
         active &= np.asarray(charts, dtype=bool)
@@ -282,9 +345,7 @@ def slim_refine(
         if not active.any():
             break
         faces = np.flatnonzero(active[fc])
-        J = jacobians(V, F[faces], uv, frames[faces])
-        W2 = _slim_weights(J)
-        g = _energy_gradients(J, weight[faces]) * area[faces][:, None, None]
+        W2, g = _slim_terms(F, faces, uv, frames, weight, area)
         grad = np.concatenate([_scatter_rows(DT, faces, g[:, i, :]) for i in range(2)])
         move = active[vc] & ~pin
         if system is None or move.sum() < SYSTEM_REUSE * system.size:
@@ -293,7 +354,7 @@ def slim_refine(
         # minimiser is x - H^-1 grad E / 2; pinned vertices stay
         delta = -0.5 * system.solve(faces, W2, move, grad)
         d = np.stack([delta[:n], delta[n:]], axis=1)
-        tau_max = _segment_min(fc[faces], _step_bound(uv, d, F[faces]), n_charts)
+        tau_max = _step_bounds(uv, d, F, faces, fc, n_charts)
         tau = np.where(active, np.minimum(1.0, STEP_FRACTION * tau_max), 0.0)
         new_E = np.full(n_charts, np.inf)
         trial, trial_faces = active.copy(), faces
@@ -316,18 +377,6 @@ def slim_refine(
         E = np.where(moved, new_E, E)
         active &= moved & (gain >= tol) & (E - 4.0 > SLIM_FLOOR)
     return uv, steps
-
-
-def _slim_weights(J: np.ndarray) -> np.ndarray:
-    """``W^T W = U diag(w(s1)^2, w(s2)^2) U^T`` per Jacobian ``J = U S V^T`` (det J > 0), with
-    SLIM's symmetric Dirichlet weights ``w(s)^2 = (s + 1)(s^2 + 1) / s^3``, in closed form:
-    ``w2^2 I + (w1^2 - w2^2) u1 u1^T``, ``u1`` the leading eigenvector of ``J J^T``."""
-    s1, s2 = singular_values(J)
-    w1, w2 = ((s + 1) * (s * s + 1) / s**3 for s in (s1, s2))
-    JJ = J @ J.transpose(0, 2, 1)
-    theta = 0.5 * np.arctan2(2 * JJ[:, 0, 1], JJ[:, 0, 0] - JJ[:, 1, 1])
-    u = np.stack([np.cos(theta), np.sin(theta)], axis=1)
-    return w2[:, None, None] * np.eye(2) + (w1 - w2)[:, None, None] * u[:, :, None] * u[:, None, :]
 
 
 #: SLIM's system keeps its pattern (and symbolic factorization) while the charts still moving

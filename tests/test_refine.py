@@ -374,3 +374,80 @@ def test_the_proxy_pattern_read_off_the_edges_is_the_sorted_one(seed):
     for got, want in zip(mesh_pattern(local, m, entry), expected, strict=True):
         np.testing.assert_array_equal(got, want)
     assert mesh_pattern(np.array([[0, 1, 1]]), 2, entry[:0]) is None  # a repeated vertex
+
+
+def _random_positive_map(seed: int, n_faces: int = 200):
+    """Random 3-D triangles and a random uv map with every triangle positive (two charts)."""
+    rng = np.random.default_rng(seed)
+    V = rng.normal(size=(3 * n_faces, 3))
+    F = np.arange(3 * n_faces).reshape(-1, 3)
+    uv = rng.normal(size=(3 * n_faces, 2))
+    area = signed_areas(uv, F)
+    F[area < 0] = F[area < 0][:, [0, 2, 1]]
+    vc = (np.arange(3 * n_faces) >= 3 * (n_faces // 2)).astype(np.int64)
+    return V, F, uv, vc
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_the_compiled_slim_terms_match_their_array_forms(seed):
+    """SLIM's per-face weights and energy gradient (compiled loops) against the closed forms
+    written with numpy arrays: ``W^T W = U diag(w(s)^2) U^T`` from an SVD, and the gradient of
+    the energy by central differences."""
+    from segparam.quality import inverse_frames, jacobians, triangle_frames
+    from segparam.refine import _energy_terms, _slim_terms
+
+    V, F, uv, _ = _random_positive_map(seed)
+    frames = inverse_frames(triangle_frames(V, F))
+    weight = np.where(np.arange(len(F)) % 2, 16.0, 0.0)
+    area = np.random.default_rng(seed).uniform(0.5, 2.0, len(F))
+    W2, g = _slim_terms(F, np.arange(len(F)), uv, frames, weight, area)
+    J = jacobians(V, F, uv, frames)
+    U, S, _ = np.linalg.svd(J)
+    w = (S + 1) * (S * S + 1) / S**3
+    np.testing.assert_allclose(W2, U @ (w[:, :, None] * U.transpose(0, 2, 1)), rtol=1e-9)
+    h = 1e-6
+    for i in range(2):
+        for j in range(2):
+            step = np.zeros((2, 2))
+            step[i, j] = h
+            diff = _energy_terms(J + step, weight) - _energy_terms(J - step, weight)
+            np.testing.assert_allclose(g[:, i, j], area * diff / (2 * h), rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_the_compiled_energies_and_step_bounds_match_their_array_forms(seed):
+    """Per chart: the energy (compiled) equals :func:`symmetric_dirichlet` of the chart alone,
+    and the step bound is the smallest positive root of each triangle's signed area along the
+    step, found by ``np.roots``."""
+    from segparam.quality import inverse_frames, triangle_frames
+    from segparam.refine import _chart_energies, _step_bounds
+
+    V, F, uv, vc = _random_positive_map(seed)
+    frames = inverse_frames(triangle_frames(V, F))
+    fc = vc[F[:, 0]]
+    area = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1) / 2
+    total = np.bincount(fc, weights=area)
+    weight = np.full(len(F), 3.0)
+    E = _chart_energies(F, np.arange(len(F)), uv, frames, weight, area, fc, total)
+    for c in range(2):
+        faces = F[fc == c]
+        expected = symmetric_dirichlet(V, faces, uv, angle_weight=3.0)
+        np.testing.assert_allclose(E[c], expected, rtol=1e-12)
+    d = np.random.default_rng(seed + 100).normal(size=uv.shape)
+    tau = _step_bounds(uv, d, F, np.arange(len(F)), fc, 2)
+    for c in range(2):
+        roots = []
+        for f in F[fc == c]:
+            p1, p2 = uv[f[1]] - uv[f[0]], uv[f[2]] - uv[f[0]]
+            q1, q2 = d[f[1]] - d[f[0]], d[f[2]] - d[f[0]]
+            a = p1[0] * p2[1] - p1[1] * p2[0]
+            b = p1[0] * q2[1] - p1[1] * q2[0] + q1[0] * p2[1] - q1[1] * p2[0]
+            cc = q1[0] * q2[1] - q1[1] * q2[0]
+            r = np.roots([cc, b, a])
+            roots += [x.real for x in r if abs(x.imag) < 1e-12 and x.real > 0]
+        assert tau[c] == pytest.approx(min(roots, default=np.inf), rel=1e-9)
+    # a flipped triangle makes its chart's energy infinite
+    flipped = F.copy()
+    flipped[0] = flipped[0][[0, 2, 1]]
+    E = _chart_energies(flipped, np.arange(len(F)), uv, frames, weight, area, fc, total)
+    assert E[0] == np.inf and np.isfinite(E[1])
