@@ -176,8 +176,8 @@ def _slim_terms(F, faces, x, frames, weight, area):  # pragma: no cover - compil
         q = math.hypot(j00 + j11, j10 - j01)
         r = math.hypot(j00 - j11, j01 + j10)
         s1, s2 = (q + r) / 2, abs(q - r) / 2
-        w1 = (s1 + 1) * (s1 * s1 + 1) / (s1 * s1 * s1)
-        w2 = (s2 + 1) * (s2 * s2 + 1) / (s2 * s2 * s2)
+        w1 = (s1 + 1) * (s1 * s1 + 1) / (s1 * s1 * s1)  # w(s1)^2
+        w2 = (s2 + 1) * (s2 * s2 + 1) / (s2 * s2 * s2)  # w(s2)^2
         theta = 0.5 * math.atan2(
             2 * (j00 * j10 + j01 * j11), (j00 * j00 + j01 * j01) - (j10 * j10 + j11 * j11)
         )
