@@ -23,8 +23,8 @@ Then (not in the paper, on by default, ``refine="none"`` turns it off) :func:`ar
 few as-rigid-as-possible iterations from that map and keeps them only if they do not make the map
 worse: measured on folded cortex-like parcels, it turns most of the eigenmap's few boundary flips
 into bijective maps and brings the median angle distortion close to 1 (see BENCHMARKS.md). A
-refined map that is still not bijective is refined again from the next pairs of eigenvectors
-(``FALLBACK_PAIRS``).
+refined map of a disk that is still not bijective is refined again from the next pairs of
+eigenvectors (``FALLBACK_PAIRS``).
 ``refine="slim"`` (the pipeline's default, ``[split] refine``) then runs the flip-free
 distortion refinement of :mod:`segparam.refine` on a map with no flipped triangle.
 
@@ -55,6 +55,7 @@ from .mesh import (
     face_normals,
     is_edge_manifold,
     is_vertex_manifold,
+    label_topology,
     mesh_arrays,
     plane_basis,
     vertex_adjacency,
@@ -1063,6 +1064,11 @@ def _arap(
 #: no other pair rescued a chart, and every pair tried costs a refinement (brain-2k's
 #: parameterize stage 0.30 -> 0.55 s with five pairs): so these two.
 FALLBACK_PAIRS = ((0, 2), (1, 3))
+#: ... tried on charts with one boundary loop only. On the 15 meshes of a session-12 count
+#: (``bench_atlas.py --quick``'s, and realistic brains of seeds 1-3 at 2k and 20k faces) the
+#: pairs rescued 9 of 25 failing charts, every one a disk, and none of the 13 with two or more
+#: loops (the CAD plate's 6 hole walls, 7 brain pieces): their tries cost the plate's stage
+#: 0.037 s of 0.18 (BENCHMARKS.md, section 0.1, session 12).
 
 
 def _other_pairs(
@@ -1187,10 +1193,10 @@ class HessianSolver:
         for angle distortion), kept when bijective (and, on charts of fewer than
         ``SMALL_CHART_FACES`` faces, when its L2 stretch is at most ``MAX_STRETCH_INCREASE``
         above the map's before).
-        ``refine="none"`` returns the paper's map as it is. With a refinement, a map that still
-        is not bijective is refined again from the next pairs of eigenvectors of ``K``
-        (``FALLBACK_PAIRS``, first bijective kept): the paper's pair can fold a chart over
-        globally, which the refinement cannot undo.
+        ``refine="none"`` returns the paper's map as it is. With a refinement, a map of a disk
+        (one boundary loop) that still is not bijective is refined again from the next pairs of
+        eigenvectors of ``K`` (``FALLBACK_PAIRS``, first bijective kept): the paper's pair can
+        fold a chart over globally, which the refinement cannot undo.
 
         ``slim_below``: a map that stretches more than this (L2) before ``"slim"`` is returned
         unrefined. The split stage passes its stretch target: the conformal term trades stretch
@@ -1214,7 +1220,7 @@ class HessianSolver:
         t2 = time.perf_counter()
         args = (frames, refine, refine_iterations, angle_weight, boundary, slim_below)
         uv, quality, refined = _refine_map(self._Vn, self.F, uv, *args)
-        if not quality.bijective and refine != "none":
+        if not quality.bijective and refine != "none" and len(boundary[1]) == 1:  # a disk
             select = self.method == "hessian"
             for uv_p in _other_pairs(self._Vn, self.F, self.K, frames, seed=seed, select=select):
                 uv_p, q_p, _ = _refine_map(self._Vn, self.F, uv_p, *args)
@@ -1274,7 +1280,8 @@ def parameterize_chart(
         they do not make the map worse (:meth:`HessianSolver.solve`); ``"slim"``: the same, then
         the flip-free symmetric Dirichlet refinement (:mod:`segparam.refine`), kept when
         bijective; ``"none"``: the paper's map. With ``"arap"`` or ``"slim"`` a map that is not
-        bijective is refined again from the next eigenvector pairs (``FALLBACK_PAIRS``).
+        bijective is refined again from the next eigenvector pairs if the chart is a disk
+        (``FALLBACK_PAIRS``).
     angle_weight : float
         ``refine="slim"`` only: weight (>= 0) of the conformal term added to the symmetric
         Dirichlet energy (:func:`segparam.refine.slim_refine`); higher trades L2 stretch for
@@ -1751,6 +1758,13 @@ def _fallback_pairs(Vn, F, K, vstart, fstart, frames, uv, q, refined, starved, a
         return
     size = np.diff(np.r_[vstart, len(Vn)])
     n_faces = np.diff(np.r_[fstart, len(F)])
+    # Only disks: a chart with a hole (the wall around a drilled hole) has no near-isometric
+    # bijective map from any pair (see FALLBACK_PAIRS).
+    faces = np.concatenate([np.arange(fstart[c], fstart[c] + n_faces[c]) for c in fail])
+    owner = np.repeat(np.arange(len(fail)), n_faces[fail])
+    fail = fail[label_topology(F[faces], owner, len(fail))["loops"] == 1]
+    if len(fail) == 0:
+        return
     starts = {}
     for c in fail.tolist():  # loop over the few charts left: their next eigenvector pairs
         v_c = slice(vstart[c], vstart[c] + size[c])

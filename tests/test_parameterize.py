@@ -475,6 +475,34 @@ def test_a_folded_eigenmap_is_refined_from_the_next_eigenvector_pair(monkeypatch
     assert not solver.solve().bijective
 
 
+def test_a_tube_is_not_tried_again_from_other_eigenvector_pairs(monkeypatch):
+    """A chart with two boundary loops (the wall of a drilled hole: an open tube) has no
+    bijective near-isometric map; neither solver refines it again from other pairs
+    (``FALLBACK_PAIRS`` are for disks), and its map is reported as not bijective."""
+    import segparam.parameterize as parameterize
+    from segparam.parameterize import solve_charts
+
+    n_theta, n_z = 24, 6
+    theta = 2 * np.pi * np.arange(n_theta) / n_theta
+    z = np.linspace(0.0, 1.5, n_z)
+    V = np.stack([np.repeat(np.cos(theta)[None], n_z, 0), np.repeat(np.sin(theta)[None], n_z, 0),
+                  np.repeat(z[:, None], n_theta, 1)], -1).reshape(-1, 3)  # fmt: skip
+    i, j = (a.ravel() for a in np.meshgrid(np.arange(n_z - 1), np.arange(n_theta), indexing="ij"))
+    a, b = i * n_theta + j, i * n_theta + (j + 1) % n_theta
+    F = np.concatenate(
+        [np.stack([a, b, b + n_theta], 1), np.stack([a, b + n_theta, a + n_theta], 1)]
+    )
+    tried = []
+    real = parameterize._other_pairs
+    monkeypatch.setattr(
+        parameterize, "_other_pairs", lambda *a, **k: tried.append(1) or real(*a, **k)
+    )
+    assert not HessianSolver(V, F).solve(refine="slim").bijective
+    maps = solve_charts(V, F, np.zeros(len(V), dtype=np.int64), refine="slim")
+    assert not maps.quality["bijective"][0]
+    assert tried == []
+
+
 def test_a_second_eigenvector_that_is_a_function_of_the_first_is_replaced(monkeypatch):
     # The parcel above: its second eigenvector is nearly a quadratic of the first (the pair of
     # eq. 3 folds it over a curve); the selection takes the third and the raw map is bijective,
