@@ -1758,11 +1758,11 @@ def _fallback_pairs(Vn, F, K, vstart, fstart, frames, uv, q, refined, starved, a
         return
     size = np.diff(np.r_[vstart, len(Vn)])
     n_faces = np.diff(np.r_[fstart, len(F)])
-    # Only disks: a chart with a hole (the wall around a drilled hole) has no near-isometric
-    # bijective map from any pair (see FALLBACK_PAIRS).
-    faces = np.concatenate([np.arange(fstart[c], fstart[c] + n_faces[c]) for c in fail])
+    # Only disks: the other pairs never gave a chart with a hole (the wall around a drilled
+    # hole) a bijective map (0 of 13, see FALLBACK_PAIRS).
+    fail_faces = np.concatenate([np.arange(fstart[c], fstart[c] + n_faces[c]) for c in fail])
     owner = np.repeat(np.arange(len(fail)), n_faces[fail])
-    fail = fail[label_topology(F[faces], owner, len(fail))["loops"] == 1]
+    fail = fail[label_topology(F[fail_faces], owner, len(fail))["loops"] == 1]
     if len(fail) == 0:
         return
     starts = {}
