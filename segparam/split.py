@@ -43,12 +43,15 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from .cores import Helpers, limit_blas, stop_pool
 from .errors import InvalidMeshError, check_choice, check_int, check_number
 from .linalg import DENSE_LIMIT
 from .mesh import (
+    boundary_edges,
     check_mesh,
+    corner_angles,
     face_areas,
     face_normals,
     group_by_label,
@@ -126,6 +129,15 @@ GAIN_MAX_FACES = 256
 #: was cut in two). The bisections kept on the 2k brain were of charts of 0.11-0.25, brain-20k's
 #: one of 0.11.
 GAIN_MIN_EXCESS = 0.02
+#: A chart with two or more boundary loops, each turning by less than this in total (the sum
+#: over its vertices of pi minus their corner angles, the discrete geodesic curvature), is a
+#: tube, like the wall of a drilled hole (a straight cylinder's loops turn by 0). A bijective
+#: map to the plane turns its outer loop by 2 pi, so a near-isometric map of a tube folds: it is
+#: split without a solve (:func:`_tubes`). The CAD plate of ``bench_atlas.py``: 6 hole walls
+#: (loops at 0.00 pi), solved in vain every build; the 12 brain pieces with holes that reached
+#: the solver on brain-2k and realistic 2k brains of seeds 1-3 turned by 0.36-2.87 pi at their
+#: outer loop (-1.6 to -2.9 pi inside): none is a tube (BENCHMARKS.md, section 0.1, session 12).
+TUBE_TURNING = np.pi / 4
 #: Meshes from this many faces up send whole charts to spawned workers; smaller ones are
 #: parameterized here, sharing their large batches with forked helpers (``_solve_batch``):
 #: starting a spawned worker costs about a second.
@@ -912,6 +924,13 @@ def _bulk_charts(
     # rejected, as the solver alone would raise on it: the brain-2k's 8-12-face pieces of the
     # split rounds were solved one by one for want of MAX_EXTEND spare vertices, most fine.)
     go = solver[cand] & manifold & (topo["loops"] >= 1) & ~planar_ok & ~(c_planar & ~disk)
+    holed = np.flatnonzero(go & (topo["loops"] >= 2))
+    if len(holed):  # tubes: split without a solve, as _try_piece would
+        Vh, Fh, vh = part(holed)
+        tube = holed[_tubes(Vh, Fh, vh[Fh[:, 0]], len(holed))]
+        go[tube] = False
+        if rejected is not None:
+            rejected[cand[tube]] = True
     take = np.flatnonzero(go)
     if len(take):
         Vs, Fs, vc = part(take)
@@ -1015,6 +1034,30 @@ def _stretch_limit(n_faces, cfg: SplitConfig):
         return None
     small = np.asarray(n_faces) < STRETCH_MIN_FACES
     return np.where(small, max(cfg.max_stretch, SMALL_CHART_MAX_STRETCH), cfg.max_stretch)
+
+
+def _tubes(V: np.ndarray, F: np.ndarray, face_chart: np.ndarray, n_charts: int) -> np.ndarray:
+    """Per chart of a disjoint union (every chart its own vertices): whether it has two or more
+    boundary loops and each turns by less than ``TUBE_TURNING`` in total. Loops are the pieces
+    of the boundary graph (a manifold boundary: where two loops touch they count as one, and
+    the chart is not called a tube)."""
+    out = np.zeros(n_charts, dtype=bool)
+    B = boundary_edges(F)
+    if len(B) == 0:
+        return out
+    angle_sum = np.bincount(F.ravel(), weights=corner_angles(V, F).ravel(), minlength=len(V))
+    verts, idx = np.unique(B, return_inverse=True)
+    idx = idx.reshape(-1, 2)
+    G = sp.coo_matrix((np.ones(len(idx)), (idx[:, 0], idx[:, 1])), shape=(len(verts),) * 2)
+    n_loops, loop = connected_components(G, directed=False)
+    turning = np.bincount(loop, weights=np.pi - angle_sum[verts], minlength=n_loops)
+    vert_chart = np.empty(len(V), dtype=np.int64)
+    vert_chart[F] = face_chart[:, None]
+    loop_chart = np.empty(n_loops, dtype=np.int64)
+    loop_chart[loop] = vert_chart[verts]
+    loops = np.bincount(loop_chart, minlength=n_charts)
+    turned = np.bincount(loop_chart, weights=np.abs(turning) >= TUBE_TURNING, minlength=n_charts)
+    return (loops >= 2) & (turned == 0)
 
 
 def _solve_in_rounds(
@@ -1216,6 +1259,9 @@ def _try_piece(
                 quality = None
             if quality is not None and quality.bijective:
                 return Chart(faces, vertices, local_F, uv, quality, src, depth, "planar")
+        if _tubes(Vl, local_F, np.zeros(len(local_F), dtype=np.int64), 1)[0]:
+            log.debug("chart %d depth %d: a tube (TUBE_TURNING), split", src, depth)
+            return None
         try:
             result = parameterize_chart(
                 Vl, local_F, method=cfg.method, tangent=cfg.tangent, seed=seed, refine=cfg.refine,

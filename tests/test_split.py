@@ -260,3 +260,67 @@ def test_a_chart_curved_all_over_is_not_bisected_for_the_gain(monkeypatch):
     check_chart_set(V, F, halves)
     assert len(halves.charts) > 1
     assert _atlas_excess(V, F, halves) < _atlas_excess(V, F, cs) - split.MIN_SPLIT_GAIN
+
+
+def _tube(n_theta: int = 24, n_z: int = 5, height: float = 0.8, radius: float = 1.0):
+    """An open cylinder (two boundary loops, each a geodesic: turning 0)."""
+    theta = 2 * np.pi * np.arange(n_theta) / n_theta
+    z = np.linspace(0.0, height, n_z)
+    V = np.stack(
+        [radius * np.cos(theta)[None].repeat(n_z, 0), radius * np.sin(theta)[None].repeat(n_z, 0),
+         z[:, None].repeat(n_theta, 1)], -1,
+    ).reshape(-1, 3)  # fmt: skip
+    i, j = (a.ravel() for a in np.meshgrid(np.arange(n_z - 1), np.arange(n_theta), indexing="ij"))
+    a, b = i * n_theta + j, i * n_theta + (j + 1) % n_theta
+    F = np.concatenate(
+        [np.stack([a, b, b + n_theta], 1), np.stack([a, b + n_theta, a + n_theta], 1)]
+    )
+    return V, F
+
+
+def _washer(n_theta: int = 24, n_r: int = 4):
+    """A flat annulus (outer loop turning 2 pi, inner -2 pi)."""
+    V, F = _tube(n_theta, n_r)
+    r = 1.0 + V[:, 2] / V[:, 2].max()  # the tube's height becomes the radius
+    V = np.stack([r * V[:, 0], r * V[:, 1], np.zeros(len(V))], 1)
+    return V, F
+
+
+def test_tubes_are_told_from_washers_and_disks():
+    """``_tubes``: a chart with two or more loops, each turning by less than TUBE_TURNING, per
+    chart of a union; a washer (flat annulus) and a disk are not."""
+    from segparam.split import _tubes
+
+    tube, washer, disk = _tube(), _washer(), tri_grid(6, 6)
+    parts = [tube, washer, disk, tube]
+    offsets = np.cumsum([0] + [len(V) for V, _ in parts])
+    V = np.concatenate([V for V, _ in parts])
+    F = np.concatenate([F + o for (_, F), o in zip(parts, offsets, strict=False)])
+    face_chart = np.repeat(np.arange(4), [len(F) for _, F in parts])
+    assert _tubes(V, F, face_chart, 4).tolist() == [True, False, False, True]
+
+
+def test_a_tube_is_split_without_a_solve(monkeypatch):
+    """The wall of a drilled hole is cut without the solver ever seeing it whole: every chart
+    the solver gets (batched or alone) has fewer faces than the tube, and the pieces are
+    bijective and cover it."""
+    import segparam.split as split
+
+    V, F = _tube(n_theta=32, n_z=6)
+    sizes = []
+    batched, alone = split.solve_charts, split.parameterize_chart
+
+    def spy_batch(V, F, vert_chart, **kw):
+        sizes.extend(np.bincount(vert_chart[F[:, 0]]).tolist())
+        return batched(V, F, vert_chart, **kw)
+
+    def spy_alone(V, F, **kw):
+        sizes.append(len(F))
+        return alone(V, F, **kw)
+
+    monkeypatch.setattr(split, "solve_charts", spy_batch)
+    monkeypatch.setattr(split, "parameterize_chart", spy_alone)
+    out = parameterize_charts(V, F, np.zeros(len(F), dtype=np.int64), config=SplitConfig(n_jobs=1))
+    assert sizes and max(sizes) < len(F)
+    assert np.array_equal(chart_face_cover(out.charts, len(F)), np.ones(len(F)))
+    assert all(c.quality.bijective for c in out.charts)
