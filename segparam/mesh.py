@@ -601,6 +601,27 @@ def euler_characteristic(F: np.ndarray, *, edge_index: tuple | None = None) -> i
     return int(len(np.unique(F)) - len(E) + len(F))
 
 
+def boundary_pieces(B: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
+    """The pieces of the graph of boundary half-edges ``B`` (``(k, 2)``, ``k >= 1``): the loops
+    of a manifold boundary (two loops that touch at a vertex are one piece), unordered.
+
+    Returns
+    -------
+    verts : (nb,) int64 ndarray
+        The boundary vertices, sorted.
+    idx : (k, 2) int64 ndarray
+        ``B`` in positions of ``verts``.
+    n_pieces : int
+    piece : (nb,) int ndarray
+        Each boundary vertex's piece.
+    """
+    verts, idx = np.unique(B, return_inverse=True)
+    idx = idx.reshape(-1, 2)
+    G = sp.coo_matrix((np.ones(len(idx)), (idx[:, 0], idx[:, 1])), shape=(len(verts),) * 2)
+    n_pieces, piece = _cc(G, directed=False)
+    return verts, idx, n_pieces, piece
+
+
 def boundary_loops(F: np.ndarray, *, boundary: np.ndarray | None = None) -> list[np.ndarray]:
     """Ordered boundary loops, each following the face winding, longest first.
 

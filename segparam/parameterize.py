@@ -49,6 +49,7 @@ from .linalg import lowest_pairs, one_blas_thread, smallest_eigenpairs, spd_solv
 from .mesh import (
     boundary_edges,
     boundary_loops,
+    boundary_pieces,
     check_mesh,
     edges,
     face_areas,
@@ -1463,11 +1464,7 @@ def _charts_loops_oriented(
     out = np.zeros(n_charts, dtype=bool)
     if len(B) == 0:
         return out
-    verts, idx = np.unique(B, return_inverse=True)
-    idx = idx.reshape(-1, 2)
-    nb = len(verts)
-    G = sp.coo_matrix((np.ones(len(idx)), (idx[:, 0], idx[:, 1])), shape=(nb, nb))
-    n_loops, loop = graph_components(G, directed=False)
+    verts, idx, n_loops, loop = boundary_pieces(B)
     p, q = uv[B[:, 0]], uv[B[:, 1]]
     area = 0.5 * np.bincount(
         loop[idx[:, 0]], weights=p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0], minlength=n_loops

@@ -43,13 +43,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from .cores import Helpers, limit_blas, stop_pool
 from .errors import InvalidMeshError, check_choice, check_int, check_number
 from .linalg import DENSE_LIMIT
 from .mesh import (
     boundary_edges,
+    boundary_pieces,
     check_mesh,
     corner_angles,
     face_areas,
@@ -1046,10 +1046,7 @@ def _tubes(V: np.ndarray, F: np.ndarray, face_chart: np.ndarray, n_charts: int) 
     if len(B) == 0:
         return out
     angle_sum = np.bincount(F.ravel(), weights=corner_angles(V, F).ravel(), minlength=len(V))
-    verts, idx = np.unique(B, return_inverse=True)
-    idx = idx.reshape(-1, 2)
-    G = sp.coo_matrix((np.ones(len(idx)), (idx[:, 0], idx[:, 1])), shape=(len(verts),) * 2)
-    n_loops, loop = connected_components(G, directed=False)
+    verts, _, n_loops, loop = boundary_pieces(B)
     turning = np.bincount(loop, weights=np.pi - angle_sum[verts], minlength=n_loops)
     vert_chart = np.empty(len(V), dtype=np.int64)
     vert_chart[F] = face_chart[:, None]

@@ -325,3 +325,21 @@ def test_edges_ends_are_the_counts_and_first_and_last_half_edges():
         want_first, want_last = mesh.edge_half_edges(h2e, len(E))
         np.testing.assert_array_equal(first, want_first)
         np.testing.assert_array_equal(last, want_last)
+
+
+def test_boundary_pieces_are_the_loops():
+    """``boundary_pieces``: a square grid has one boundary loop, the grid with its middle cell
+    removed two; every boundary vertex gets its loop, ``idx`` indexes ``verts``."""
+    from segparam.mesh import boundary_edges, boundary_pieces
+
+    i, j = (a.ravel() for a in np.meshgrid(np.arange(3), np.arange(3), indexing="ij"))
+    v = 4 * i + j
+    quads = np.stack([v, v + 4, v + 5, v + 1], 1)
+    for keep, expected in ((np.ones(9, dtype=bool), 1), (np.arange(9) != 4, 2)):
+        q = quads[keep]
+        F = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
+        B = boundary_edges(F)
+        verts, idx, n, piece = boundary_pieces(B)
+        assert n == expected
+        assert np.array_equal(verts[idx], B)
+        assert len(np.unique(piece)) == expected and len(piece) == len(verts)
