@@ -35,7 +35,7 @@ Placement rules (``rule``):
     meets no forbidden cell; the `n_candidates` lowest of those per orientation are slid.
 
 Conventions: grids are indexed ``[row = v, col = u]``; ``np.rot90(mask, -k)`` turns a
-footprint by k counter-clockwise quarter turns of its uv frame (see ``pack._turn``).
+footprint by k counter-clockwise quarter turns of its uv frame (see ``pack._turns``).
 """
 
 from __future__ import annotations

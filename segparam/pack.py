@@ -608,11 +608,6 @@ def _turns(k: np.ndarray, cols: np.ndarray, rows: np.ndarray) -> np.ndarray:
     return T
 
 
-def _turn(k: int, cols: int, rows: int) -> np.ndarray:
-    """(3, 3) affine of k counter-clockwise quarter turns of the box [0, cols] x [0, rows]."""
-    return _turns(np.array([k]), np.array([cols]), np.array([rows]))[0]
-
-
 class _Angles:
     """Every chart in every orientation angle the packer tries, flattened for `canvas.trial`.
 

@@ -140,7 +140,7 @@ def symmetric_dirichlet(
 # ----------------------------------------------------------------------------------------------
 # one iteration's per-triangle arithmetic, compiled: a loop over the faces of the charts still
 # moving instead of ~40 numpy calls on small arrays (SLIM's time on the solver calls of brain-2k
-# and brain-20k 0.52 -> 0.33 s; the maps agree with the array forms to 3e-14, BENCHMARKS.md
+# and brain-20k 0.40 -> 0.25 s; the maps agree with the array forms to 3e-14, BENCHMARKS.md
 # section 0.1, session 12). ``frames[f]`` is the inverse frame of face ``f``
 # (:func:`segparam.quality.inverse_frames`), so ``J = [uv1 - uv0, uv2 - uv0] frames[f]``.
 
