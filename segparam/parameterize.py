@@ -1705,20 +1705,23 @@ def _refine_charts(
     """:func:`_refine_map` of every chart of a disjoint union (:func:`solve_charts`' layout), all
     at once: returns (uv, quality, refined)."""
     n_charts = len(vstart)
-    q = charts_quality(Vn, F, uv, vert_chart, n_charts, frames)
     use_r = np.zeros(n_charts, dtype=bool)
     if refine in ("arap", "slim"):
         uv_r, steps = _arap_charts(
             Vn, F, uv, vert_chart, vstart, n_charts, iterations=refine_iterations,
             inv_frames=frames,
         )  # fmt: skip
-        if steps.any():
-            q_r = charts_quality(Vn, F, uv_r, vert_chart, n_charts, frames)
-            use_r = (steps > 0) & (
-                q_r["bijective"] | (~q["bijective"] & (q_r["n_flipped"] < q["n_flipped"]))
-            )
-            q = {k: np.where(use_r, q_r[k], q[k]) for k in q}
-            uv = np.where(use_r[vert_chart][:, None], uv_r, uv)
+    if refine in ("arap", "slim") and steps.any():
+        q_r = charts_quality(Vn, F, uv_r, vert_chart, n_charts, frames)
+        # The starting map's quality only matters where ARAP's map is not bijective (usually
+        # no chart): measured there alone, chart by chart the same figures.
+        use_r = (steps > 0) & q_r["bijective"]
+        q = _some_charts_quality(Vn, F, uv, vert_chart, vstart, n_faces, frames, ~use_r, q_r)
+        use_r |= (steps > 0) & ~q["bijective"] & (q_r["n_flipped"] < q["n_flipped"])
+        q = {k: np.where(use_r, q_r[k], q[k]) for k in q}
+        uv = np.where(use_r[vert_chart][:, None], uv_r, uv)
+    else:
+        q = charts_quality(Vn, F, uv, vert_chart, n_charts, frames)
     if refine == "slim":
         go = (q["n_flipped"] == 0) & (q["n_degenerate"] == 0)  # others: energy infinite
         if slim_below is not None:
@@ -1743,13 +1746,34 @@ def _refine_charts(
     return uv, q, use_r
 
 
+def _some_charts_quality(Vn, F, uv, vert_chart, vstart, n_faces, frames, which, like):
+    """:func:`charts_quality` of the charts ``which`` (a boolean mask) of a :func:`solve_charts`
+    union, measured on those charts alone; the other charts' entries are ``like``'s."""
+    if which.all():
+        return charts_quality(Vn, F, uv, vert_chart, len(vstart), frames)
+    out = {k: v.copy() for k, v in like.items()}
+    todo = np.flatnonzero(which)
+    if len(todo) == 0:
+        return out
+    size = np.diff(np.r_[vstart, len(Vn)])
+    fstart = np.r_[0, np.cumsum(n_faces)[:-1]]
+    verts = np.concatenate([np.arange(vstart[c], vstart[c] + size[c]) for c in todo])
+    faces = np.concatenate([np.arange(fstart[c], fstart[c] + n_faces[c]) for c in todo])
+    local = np.empty(len(Vn), dtype=np.int64)
+    local[verts] = np.arange(len(verts))
+    vc = np.repeat(np.arange(len(todo)), size[todo])
+    some = charts_quality(Vn[verts], local[F[faces]], uv[verts], vc, len(todo), frames[faces])
+    for k in out:
+        out[k][todo] = some[k]
+    return out
+
+
 def _fallback_pairs(Vn, F, K, vstart, fstart, frames, uv, q, refined, starved, args):
     """``FALLBACK_PAIRS`` for the charts of a :func:`solve_charts` union that are still not
     bijective (and not starved), as :meth:`HessianSolver.solve` tries them on one chart: each
     chart's start maps from its next eigenvector pairs (:func:`_other_pairs`, one small dense
-    problem per chart), then every chart's first pair refined together, then the second pair of
-    those still not bijective. The first bijective map is kept: ``uv``, ``q`` and ``refined``
-    are updated in place."""
+    problem per chart), all of them refined together; each chart keeps the map of its first
+    pair that ends bijective: ``uv``, ``q`` and ``refined`` are updated in place."""
     fail = np.flatnonzero(~q["bijective"] & ~starved)
     if len(fail) == 0:
         return
@@ -1770,25 +1794,32 @@ def _fallback_pairs(Vn, F, K, vstart, fstart, frames, uv, q, refined, starved, a
         starts[c] = list(_other_pairs(Vn[v_c], F_c, K[v_c, v_c], frames_c))
     refine, refine_iterations, angle_weight, slim_below = args
     limits = None if slim_below is None else np.broadcast_to(slim_below, (len(vstart),))
-    for t in range(len(FALLBACK_PAIRS)):  # loop over the pairs
-        todo = np.array([c for c in fail.tolist() if t < len(starts[c]) and not q["bijective"][c]])
-        if len(todo) == 0:
-            break
-        verts = np.concatenate([np.arange(vstart[c], vstart[c] + size[c]) for c in todo])
-        faces = np.concatenate([np.arange(fstart[c], fstart[c] + n_faces[c]) for c in todo])
-        local = np.empty(len(Vn), dtype=np.int64)
-        local[verts] = np.arange(len(verts))
-        vc = np.repeat(np.arange(len(todo)), size[todo])
-        uv_t, q_t, _ = _refine_charts(
-            Vn[verts], local[F[faces]], np.concatenate([starts[c][t] for c in todo]), vc,
-            np.r_[0, np.cumsum(size[todo])[:-1]], n_faces[todo], frames[faces], refine,
-            refine_iterations, angle_weight, None if limits is None else limits[todo],
-        )  # fmt: skip
-        ok = q_t["bijective"]
-        uv[verts[ok[vc]]] = uv_t[ok[vc]]
+    # Every pair of every chart refined at once (one pass, not one per pair: a pass over a
+    # few small charts costs ~10 ms whatever their size), then each chart keeps its first
+    # bijective map, as the pairs tried in turn would give.
+    cand = [(c, t) for c in fail.tolist() for t in range(len(starts[c]))]
+    if not cand:
+        return
+    todo = np.array([c for c, _ in cand])
+    verts = np.concatenate([np.arange(vstart[c], vstart[c] + size[c]) for c in todo])
+    faces = np.concatenate([np.arange(fstart[c], fstart[c] + n_faces[c]) for c in todo])
+    n_v = size[todo]
+    first = np.r_[0, np.cumsum(n_v)[:-1]]
+    vc = np.repeat(np.arange(len(todo)), n_v)
+    f_local = F[faces] - np.repeat(vstart[todo] - first, n_faces[todo])[:, None]  # in the copy
+    uv_t, q_t, _ = _refine_charts(
+        Vn[verts], f_local, np.concatenate([starts[c][t] for c, t in cand]), vc, first,
+        n_faces[todo], frames[faces], refine, refine_iterations, angle_weight,
+        None if limits is None else limits[todo],
+    )  # fmt: skip
+    for k in range(len(cand)):  # loop over the candidates (a few): the first bijective
+        c = cand[k][0]
+        if not q_t["bijective"][k] or q["bijective"][c]:
+            continue
+        uv[vstart[c] : vstart[c] + size[c]] = uv_t[first[k] : first[k] + n_v[k]]
         for name in q:
-            q[name][todo[ok]] = q_t[name][ok]
-        refined[todo[ok]] = True
+            q[name][c] = q_t[name][k]
+        refined[c] = True
 
 
 def solve_charts(

@@ -403,6 +403,21 @@ def test_charts_quality_is_chart_quality_chart_by_chart():
             assert getattr(q, name) == pytest.approx(value, rel=1e-12, abs=1e-12), name
     assert bijective == [True, False, False, False, True, False]
     assert got[1].n_crossings > 0 and got[2].n_flipped > 0 and not got[3].loops_oriented
+    # measured on some charts alone (the batched refinement's starting maps where ARAP's map
+    # is not bijective): the same figures, bit for bit; the other charts keep `like`'s
+    from segparam.parameterize import _some_charts_quality
+    from segparam.quality import inverse_frames, triangle_frames
+
+    full = charts_quality(Vu, Fu, uvu, vert_chart, len(cases))
+    vstart = np.flatnonzero(np.r_[True, np.diff(vert_chart) > 0])
+    n_faces = np.bincount(vert_chart[Fu[:, 0]], minlength=len(cases))
+    frames = inverse_frames(triangle_frames(Vu, Fu))
+    which = np.array([False, True, False, True, True, False])
+    like = {k: np.zeros_like(v) for k, v in full.items()}
+    some = _some_charts_quality(Vu, Fu, uvu, vert_chart, vstart, n_faces, frames, which, like)
+    for name, value in full.items():
+        np.testing.assert_array_equal(some[name][which], value[which], err_msg=name)
+        np.testing.assert_array_equal(some[name][~which], like[name][~which], err_msg=name)
 
 
 def test_isometric_fit_undoes_a_stretch_by_hand():
@@ -473,6 +488,42 @@ def test_a_folded_eigenmap_is_refined_from_the_next_eigenvector_pair(monkeypatch
         assert procrustes_residual(uv_c, alone.uv) < 1e-6 * np.ptp(alone.uv)
     monkeypatch.setattr(parameterize, "FALLBACK_PAIRS", ())
     assert not solver.solve().bijective
+
+
+@pytest.mark.parametrize(
+    "pairs, kept",
+    [(((0, 3), (0, 2)), (0, 3)), (((0, 2), (0, 3)), (0, 2)), (((1, 3), (0, 3), (0, 2)), (0, 3))],
+)
+def test_the_batched_fallback_keeps_the_first_pair_that_maps_bijectively(monkeypatch, pairs, kept):
+    # The folded parcel above maps bijectively from the pairs (0, 2) and (0, 3), not from (1, 3).
+    # The batched solver refines every pair of every failing chart at once; each chart keeps
+    # its first bijective pair in FALLBACK_PAIRS' order, as the chart-by-chart solver does.
+    import segparam.parameterize as parameterize
+    from segparam.parameterize import solve_charts
+    from segparam.synthetic import brain_like_parcels
+
+    parcels = brain_like_parcels(
+        12, mean_faces=460, min_faces=380, max_faces=560, connectivity="icosahedral", seed=0
+    )
+    monkeypatch.setattr(parameterize, "DEPENDENT_R2", 1.0)  # the pair of eq. 3, always
+    V, F = parcels[2]
+    monkeypatch.setattr(parameterize, "FALLBACK_PAIRS", (kept,))
+    want = HessianSolver(V, F).solve()
+    monkeypatch.setattr(parameterize, "FALLBACK_PAIRS", pairs)
+    alone = HessianSolver(V, F).solve()
+    assert want.bijective and procrustes_residual(alone.uv, want.uv) < 1e-6 * np.ptp(want.uv)
+    other = next(p for p in ((0, 2), (0, 3)) if p != kept)
+    monkeypatch.setattr(parameterize, "FALLBACK_PAIRS", (other,))
+    assert procrustes_residual(HessianSolver(V, F).solve().uv, want.uv) > 0.01 * np.ptp(want.uv)
+    monkeypatch.setattr(parameterize, "FALLBACK_PAIRS", pairs)
+    pieces = [parcels[0], (V, F)]
+    offsets = np.cumsum([0] + [len(p[0]) for p in pieces])
+    Vb = np.concatenate([p[0] for p in pieces])
+    Fb = np.concatenate([p[1] + o for p, o in zip(pieces, offsets, strict=False)])
+    maps = solve_charts(Vb, Fb, np.repeat(np.arange(2), np.diff(offsets)))
+    assert maps.quality["bijective"].all() and maps.refined[1]
+    uv = maps.uv[offsets[1] :]
+    assert procrustes_residual(uv, want.uv) < 1e-6 * np.ptp(want.uv)
 
 
 def test_a_tube_is_not_tried_again_from_other_eigenvector_pairs(monkeypatch):
