@@ -99,6 +99,11 @@ SPECTRAL_SHIFT = -1e-5
 #: brain, three 20k-face brain-like surfaces and a 100k one's proxy graph, for 7, 12 and 20
 #: clusters, 1e-6 gives the same labels as 0 with 20-45% fewer solves.
 SPECTRAL_TOL = 1e-6
+#: Relative accuracy of the Fiedler vector's eigenvalue (ARPACK ``tol``) when a chart of more
+#: than ``DENSE_LIMIT`` faces is bisected (:func:`_fiedler_vector`). Only the order of the
+#: vector's entries matters (the median cut): at 1e-10 it agreed with the subspace iteration's
+#: (residual 1e-12) to 5e-8 of its largest entry on the pieces measured, the same cuts.
+FIEDLER_TOL = 1e-10
 #: The spectral embedding's cost grows with the graph's nodes times the clusters asked for
 #: (ARPACK keeps ``2 k + 1`` vectors of the graph's size, and each restart solves once per
 #: vector), so a region cut into many charts is clustered on a proxy graph of at most
@@ -392,11 +397,49 @@ def fiedler_bisect(W: np.ndarray | sp.spmatrix, *, seed: int = 0) -> np.ndarray:
     L = sp.identity(m) - Dm @ W @ Dm  # normalized Laplacian
     if m <= 2:
         return np.arange(m) == 0
-    _, vec = smallest_eigenpairs(L.tocsr(), 2, seed=seed)
-    f = vec[:, 1] / np.sqrt(d_safe)
-    order = np.argsort(f, kind="stable")
-    side = np.zeros(m, dtype=bool)
-    side[order[: m // 2]] = True
+    return _median_side(_fiedler_vector(L.tocsr(), seed) / np.sqrt(d_safe))
+
+
+def _fiedler_vector(L: sp.csr_matrix, seed: int) -> np.ndarray:
+    """The eigenvector of the second smallest eigenvalue of a connected graph's normalized
+    Laplacian ``L`` (the smallest is 0).
+
+    Up to ``DENSE_LIMIT`` nodes a dense ``eigh`` (:func:`segparam.linalg.smallest_eigenpairs`);
+    above, ARPACK's Lanczos iteration in shift-invert mode on one Cholesky factorization of
+    ``L + I / m``: a mesh graph's second eigenvalue is about ``c / m`` (c of order 1-10), so the
+    shift keeps the two wanted eigenvalues apart from the rest after inversion at any size.
+    Measured against the subspace iteration of ``smallest_eigenpairs`` (built for the Hessian's
+    nearly degenerate null spaces) on the 18 pieces of 412-612 faces the split stage cut on
+    ``data/brain.obj``: 0.141 -> 0.061 s in all, and 0.20 -> 0.07 s on face graphs of 3.4k and
+    20k nodes, the vectors agreeing to 5e-8 or better. Falls back to the subspace iteration when
+    ARPACK does not converge.
+    """
+    m = L.shape[0]
+    if m <= DENSE_LIMIT:
+        return smallest_eigenpairs(L, 2, seed=seed)[1][:, 1]
+    shift = 1.0 / m
+    solve = spd_solver((L + shift * sp.identity(m, format="csr")).tocsc())
+    op = spla.LinearOperator((m, m), matvec=solve, dtype=np.float64)
+    v0 = np.random.RandomState(seed).uniform(-1, 1, m)
+    try:
+        values, vectors = spla.eigsh(
+            L, k=2, sigma=-shift, which="LM", OPinv=op, tol=FIEDLER_TOL, v0=v0
+        )
+    except spla.ArpackNoConvergence:
+        return smallest_eigenpairs(L, 2, seed=seed)[1][:, 1]
+    return vectors[:, np.argmax(values)]
+
+
+def _median_side(f: np.ndarray) -> np.ndarray:
+    """The nodes below the median of a Fiedler vector ``f`` (``len(f) // 2`` of them, ties by
+    index). An eigenvector's sign is arbitrary (each eigensolver, and each LAPACK build, picks
+    its own), and with an odd count it decides which half gets the middle node: ``f`` is
+    first turned so that its entry of largest magnitude is positive, so the halves are the
+    same whatever the solver."""
+    if f[np.argmax(np.abs(f))] < 0:
+        f = -f
+    side = np.zeros(len(f), dtype=bool)
+    side[np.argsort(f, kind="stable")[: len(f) // 2]] = True
     return side
 
 
@@ -477,11 +520,7 @@ def _halves(faces: np.ndarray, Wg: np.ndarray, d: np.ndarray) -> list[np.ndarray
     d_safe = np.where(d > 0, d, 1.0)
     dm = 1 / np.sqrt(d_safe)
     L = np.eye(m) - (dm[:, None] * Wg) * dm[None, :]
-    vec = lowest_pairs(L, 2)[1]
-    f = vec[:, 1] / np.sqrt(d_safe)
-    order = np.argsort(f, kind="stable")
-    side = np.zeros(m, dtype=bool)
-    side[order[: m // 2]] = True
+    side = _median_side(lowest_pairs(L, 2)[1][:, 1] / np.sqrt(d_safe))
     return [faces[side], faces[~side]]
 
 

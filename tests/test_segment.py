@@ -153,6 +153,33 @@ def test_affinity_and_bisection():
     assert abs(x[side].mean() - x[~side].mean()) > 0.4
 
 
+def test_bisection_halves_do_not_depend_on_the_eigensolver_or_its_sign(monkeypatch):
+    """Above DENSE_LIMIT faces the Fiedler vector comes from ARPACK's Lanczos iteration; its
+    halves are the dense solver's (and the subspace iteration's), and an odd count's middle face
+    goes to the same half whatever sign the eigensolver gives the vector."""
+    import segparam.segment as segment_module
+    from segparam.linalg import DENSE_LIMIT, smallest_eigenpairs
+    from segparam.segment import _median_side
+
+    V, F = tri_grid(24, 11)  # a 2:1 strip of 2 * 23 * 10 faces, less one: odd
+    keep = np.arange(len(F) - 1)
+    W = face_affinity(V, F)[keep][:, keep]
+    assert W.shape[0] > DENSE_LIMIT and W.shape[0] % 2 == 1
+    side = fiedler_bisect(W, seed=0)
+    for dense_limit in (W.shape[0], 0):  # dense eigh, then the subspace iteration
+
+        def other(L, k, seed=0, dense_limit=dense_limit):
+            return smallest_eigenpairs(L, k, seed=seed, dense_limit=dense_limit)
+
+        monkeypatch.setattr(segment_module, "smallest_eigenpairs", other)
+        monkeypatch.setattr(segment_module, "DENSE_LIMIT", W.shape[0])
+        assert np.array_equal(fiedler_bisect(W, seed=0), side)
+        monkeypatch.undo()
+    f = np.linspace(-1.0, 0.5, 7)
+    assert np.array_equal(_median_side(f), _median_side(-f))
+    assert _median_side(f).sum() == 3 and not _median_side(f)[0]  # -1 is the largest: turned
+
+
 def test_affinity_is_its_row_sum_form():
     import scipy.sparse as sp
 
