@@ -18,11 +18,13 @@ from .errors import InvalidMeshError
 
 __all__ = [
     "angle_defect",
+    "annulus_cut",
     "boundary_edges",
     "boundary_loops",
     "check_mesh",
     "connected_components",
     "corner_angles",
+    "cut_along",
     "edge_face_counts",
     "edges",
     "edge_half_edges",
@@ -620,6 +622,76 @@ def boundary_pieces(B: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, np.ndar
     G = sp.coo_matrix((np.ones(len(idx)), (idx[:, 0], idx[:, 1])), shape=(len(verts),) * 2)
     n_pieces, piece = _cc(G, directed=False)
     return verts, idx, n_pieces, piece
+
+
+def cut_along(F: np.ndarray, cut: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh ``F`` (edge-manifold, consistently oriented) cut open along the interior edges
+    ``cut`` (``(c, 2)`` vertex pairs): every vertex gets one copy per fan of faces that meet
+    across its uncut interior edges, so the two sides of a cut no longer share a vertex.
+
+    A corner of face f at vertex u and a corner of the face across f's edge (u, v) are the same
+    vertex unless (u, v) is cut (``segparam.clean`` splits non-manifold vertices the same way).
+
+    Returns
+    -------
+    F_cut : (m, 3) int64 ndarray
+        The faces on the new vertices.
+    src : (n', ) int64 ndarray
+        The vertex of ``F`` each new vertex is a copy of.
+    """
+    F = np.asarray(F, dtype=np.int64)
+    m = len(F)
+    E, h2e, count, first, last = edges(F, ends=True)
+    n = int(F.max()) + 1
+    cut = np.sort(np.asarray(cut, dtype=np.int64).reshape(-1, 2), axis=1)
+    is_cut = np.isin(E[:, 0] * n + E[:, 1], cut[:, 0] * n + cut[:, 1])
+    glued = (count == 2) & ~is_cut
+    ha, hb = first[glued], last[glued]  # u -> v in one face, v -> u in the other
+
+    def after(h):  # the half-edge after h in its face (it starts where h ends)
+        return h - h % 3 + (h % 3 + 1) % 3
+
+    # corner 3 f + k is F[f, k], where half-edge 3 f + k starts: across a glued edge, ha's start
+    # is hb's end, the start of the half-edge after hb (and the other way round)
+    G = sp.coo_matrix(
+        (np.ones(2 * len(ha)), (np.r_[ha, hb], np.r_[after(hb), after(ha)])), shape=(3 * m, 3 * m)
+    )
+    k, corner_vertex = _cc(G, directed=False)
+    src = np.empty(k, dtype=np.int64)
+    src[corner_vertex] = F.ravel()
+    return corner_vertex.reshape(m, 3).astype(np.int64), src
+
+
+def annulus_cut(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """The shortest path of edges (3-D length) from one boundary loop of an annulus (a manifold
+    mesh with two boundary loops) to the other: the one cut that opens it into a disk
+    (:func:`cut_along`). Only its ends are on the boundary.
+
+    Returns
+    -------
+    (c, 2) int64 ndarray
+        The path's edges, as vertex pairs; empty if the mesh has not two boundary loops.
+    """
+    from scipy.sparse.csgraph import dijkstra
+
+    B = boundary_edges(F)
+    if len(B) == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    verts, _, n_loops, loop = boundary_pieces(B)
+    if n_loops != 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    E, _ = edges(F)
+    length = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+    n = len(V)
+    G = sp.csr_matrix((np.r_[length, length], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
+                      shape=(n, n))  # fmt: skip
+    a, b = verts[loop == 0], verts[loop == 1]
+    dist, pred, _ = dijkstra(G, indices=a, min_only=True, return_predecessors=True)
+    end = int(b[np.argmin(dist[b])])
+    path = [end]
+    while pred[path[-1]] >= 0:  # loop along the path (a few edges: loop to loop)
+        path.append(int(pred[path[-1]]))
+    return np.column_stack([path[:-1], path[1:]]).astype(np.int64)
 
 
 def boundary_loops(F: np.ndarray, *, boundary: np.ndarray | None = None) -> list[np.ndarray]:

@@ -12,6 +12,13 @@ A planar chart (the face of a CAD part) skips the solver: its projection onto it
 exact isometry the solver would return up to a rigid motion (method ``"planar"``). On the CAD
 plate of ``benchmarks/bench_atlas.py`` (28 planar charts) the stage takes 0.8 s instead of 1.6 s.
 
+An annulus (two boundary loops) that is a tube (the wall of a drilled hole, a pipe: its map as
+it is would fold, ``TUBE_TURNING``) or whose map fails is cut open along the shortest edge path
+from one loop to the other and solved as the disk it then is (:func:`_opened`): a developable
+annulus becomes one chart with one cut that unrolls without stretch, where a bisection gives two
+charts and two cuts. The chart keeps both copies of the cut's vertices (``Chart.vertices``
+repeats them). If that map fails too, the annulus is bisected as any chart.
+
 Once every chart meets the targets, a small chart whose distortion sits at one spot (a cone of a
 coarse scan) is bisected again when that removes most of it (:func:`_split_for_gain`,
 ``min_split_gain``): on the realistic 2k-face brain of ``benchmarks/bench_atlas.py`` 98 -> 111
@@ -48,10 +55,12 @@ from .cores import Helpers, limit_blas, stop_pool
 from .errors import InvalidMeshError, check_choice, check_int, check_number
 from .linalg import DENSE_LIMIT
 from .mesh import (
+    annulus_cut,
     boundary_edges,
     boundary_pieces,
     check_mesh,
     corner_angles,
+    cut_along,
     face_areas,
     face_normals,
     group_by_label,
@@ -133,7 +142,8 @@ GAIN_MIN_EXCESS = 0.02
 #: over its vertices of pi minus their corner angles, the discrete geodesic curvature), is a
 #: tube, like the wall of a drilled hole (a straight cylinder's loops turn by 0). A bijective
 #: map to the plane turns its outer loop by 2 pi, so a near-isometric map of a tube folds: it is
-#: split without a solve (:func:`_tubes`). The CAD plate of ``bench_atlas.py``: 6 hole walls
+#: not solved as it is (:func:`_tubes`) but cut open into a disk if it has two loops (see
+#: :func:`_opened`), else split. The CAD plate of ``bench_atlas.py``: 6 hole walls
 #: (loops at 0.00 pi), solved in vain every build; the 12 brain pieces with holes that reached
 #: the solver on brain-2k and realistic 2k brains of seeds 1-3 turned by 0.36-2.87 pi at their
 #: outer loop (-1.6 to -2.9 pi inside): none is a tube (BENCHMARKS.md, section 0.1, session 12).
@@ -836,7 +846,8 @@ def _bulk_charts(
 
     A chart that fails any of these is not in the result: the per-chart path maps or splits it,
     as before. Where :func:`_try_piece` could only fail the same way (a small chart whose
-    projection folds, a chart the solver mapped outside the targets), ``rejected[chart]`` is set
+    projection folds, a chart the solver mapped outside the targets that is no annulus, a tube
+    of three loops or more), ``rejected[chart]`` is set
     (when given), so that the caller can split it without trying it again; ``bijective[chart]``
     (when given) is set where the solver's map was bijective, kept or not. ``V`` is in the
     stage's unit frame; the charts returned are in mesh indices and units (``uv * size``).
@@ -925,30 +936,58 @@ def _bulk_charts(
     # split rounds were solved one by one for want of MAX_EXTEND spare vertices, most fine.)
     go = solver[cand] & manifold & (topo["loops"] >= 1) & ~planar_ok & ~(c_planar & ~disk)
     holed = np.flatnonzero(go & (topo["loops"] >= 2))
-    if len(holed):  # tubes: split without a solve, as _try_piece would
+    # Tubes are not solved as they are: one of two loops is cut open into a disk and solved with
+    # the others (as _opened does alone), one of more loops is split. An annulus whose map fails
+    # here gets that one more try from _try_piece.
+    annulus = topo["loops"] == 2
+    opened, cuts = np.zeros(0, dtype=np.int64), []
+    if len(holed):
         Vh, Fh, vh = part(holed)
         tube = holed[_tubes(Vh, Fh, vh[Fh[:, 0]], len(holed))]
         go[tube] = False
         if rejected is not None:
-            rejected[cand[tube]] = True
+            rejected[cand[tube[~annulus[tube]]]] = True
+        for c in tube[annulus[tube]].tolist():  # loop over the tubes (a few): one cut each
+            verts, local_F = sub.of(int(cand[c]))
+            F_cut, copy_of = cut_along(local_F, annulus_cut(V[verts], local_F))
+            if len(copy_of) <= DENSE_LIMIT:  # else _try_piece solves it alone
+                opened = np.r_[opened, c]
+                cuts.append((V[verts[copy_of]], F_cut, copy_of))
     take = np.flatnonzero(go)
-    if len(take):
+    if len(take) or len(opened):  # one solver batch: the charts as they are, then the tubes cut
         Vs, Fs, vc = part(take)
+        n_take = len(take)
+        nv = np.r_[np.bincount(vc, minlength=n_take), [len(c[0]) for c in cuts]].astype(np.int64)
+        vstart = np.r_[0, np.cumsum(nv)[:-1]]
+        Vs = np.concatenate([Vs] + [c[0] for c in cuts])
+        Fs = np.concatenate([Fs] + [c[1] + vstart[n_take + j] for j, c in enumerate(cuts)])
+        vc = np.repeat(np.arange(len(nv)), nv)
+        n_faces = np.r_[nf[cand][take], nf[cand][opened]]
         try:
-            maps = _solve_batch(Vs, Fs, vc, _stretch_limit(nf[cand][take], cfg), cfg, helpers)
+            maps = _solve_batch(Vs, Fs, vc, _stretch_limit(n_faces, cfg), cfg, helpers)
         except (InvalidMeshError, np.linalg.LinAlgError) as exc:  # not expected: one by one
-            log.debug("batched solver failed (%s); solving %d charts one by one", exc, len(take))
+            log.debug("batched solver failed (%s); solving %d charts one by one", exc, len(nv))
             return out
         q = maps.quality
         # a new array: ``&=`` on q["bijective"] itself would rewrite the maps' quality
-        ok = q["bijective"] & _within_targets(
-            q["angle_distortion"], q["l2_stretch"], nf[cand][take], cfg
-        )
-        emit(take, vc, maps.uv, maps.quality, ok, "hessian")
+        ok = q["bijective"] & _within_targets(q["angle_distortion"], q["l2_stretch"], n_faces, cfg)
+        emit(take, vc, maps.uv, q, ok[:n_take], "hessian")
+        for j, c in enumerate(opened.tolist()):  # loop over the tubes cut open: their charts
+            k, src = n_take + j, int(cand[c])
+            if ok[k]:
+                verts, _ = sub.of(src)
+                rows = order[bounds[src] : bounds[src + 1]]
+                uv = maps.uv[vstart[k] : vstart[k] + nv[k]] * size
+                _, F_cut, copy_of = cuts[j]
+                quality = quality_records(q, [k])[0]
+                out[src] = ([Chart(rows, verts[copy_of], F_cut, uv, quality, src, 0, "hessian")],
+                            True)  # fmt: skip
         if rejected is not None:
-            rejected[cand[take[~ok]]] = True
+            # an annulus solved as it is gets one more try (cut open) from _try_piece
+            retry = np.r_[annulus[take], np.zeros(len(opened), dtype=bool)]
+            rejected[cand[np.r_[take, opened][~ok & ~retry]]] = True
         if bijective is not None:
-            bijective[cand[take[q["bijective"]]]] = True
+            bijective[cand[np.r_[take, opened][q["bijective"]]]] = True
     return out
 
 
@@ -1257,27 +1296,20 @@ def _try_piece(
             if quality is not None and quality.bijective:
                 return Chart(faces, vertices, local_F, uv, quality, src, depth, "planar")
         if _tubes(Vl, local_F, np.zeros(len(local_F), dtype=np.int64), 1)[0]:
-            log.debug("chart %d depth %d: a tube (TUBE_TURNING), split", src, depth)
-            return None
+            log.debug("chart %d depth %d: a tube (TUBE_TURNING), cut open or split", src, depth)
+            return _opened(Vl, local_F, faces, vertices, src, depth, cfg, seed, status)
         try:
-            result = parameterize_chart(
-                Vl, local_F, method=cfg.method, tangent=cfg.tangent, seed=seed, refine=cfg.refine,
-                angle_weight=cfg.angle_weight, slim_below=_stretch_limit(len(faces), cfg),
-            )  # fmt: skip
+            result = _solved(Vl, local_F, len(faces), cfg, seed)
         except InvalidMeshError as exc:  # not a disk (e.g. a half that pinches): split it
             log.debug("chart %d depth %d: %s", src, depth, exc)
             return None
         if status is not None:
             status["bijective"] = bool(result.bijective)
-        q = result.quality
-        ok = result.bijective and bool(
-            _within_targets(q.angle_distortion, q.l2_stretch, len(faces), cfg)
-        )
-        if ok:
+        if _kept(result, len(faces), cfg):
             return Chart(
                 faces, vertices, local_F, result.uv, result.quality, src, depth, result.method
             )
-        return None
+        return _opened(Vl, local_F, faces, vertices, src, depth, cfg, seed, status)
     if len(faces) > 1 and not is_disk(local_F):
         return None
     uv = project_chart(Vl, local_F)
@@ -1293,6 +1325,62 @@ def _try_piece(
     ):
         return Chart(faces, vertices, local_F, uv, quality, src, depth, "projection")
     return None
+
+
+def _solved(V: np.ndarray, F: np.ndarray, n_faces: int, cfg: SplitConfig, seed: int):
+    """The solver's map of one piece, with the stage's settings."""
+    return parameterize_chart(
+        V, F, method=cfg.method, tangent=cfg.tangent, seed=seed, refine=cfg.refine,
+        angle_weight=cfg.angle_weight, slim_below=_stretch_limit(n_faces, cfg),
+    )  # fmt: skip
+
+
+def _kept(result, n_faces: int, cfg: SplitConfig) -> bool:
+    """Whether a solver's map is kept: bijective and within the targets."""
+    q = result.quality
+    return bool(result.bijective) and bool(
+        _within_targets(q.angle_distortion, q.l2_stretch, n_faces, cfg)
+    )
+
+
+def _opened(
+    V: np.ndarray,
+    F: np.ndarray,
+    faces: np.ndarray,
+    vertices: np.ndarray,
+    src: int,
+    depth: int,
+    cfg: SplitConfig,
+    seed: int,
+    status: dict | None,
+) -> Chart | None:
+    """An annulus piece (two boundary loops: a tube, or a piece whose map as it is failed) cut
+    open along the shortest edge path from one loop to the other (:func:`segparam.mesh.
+    annulus_cut`) and solved as the disk it then is; None if it is no annulus or that map is
+    not kept (the caller splits it). One cut is the whole answer for a developable annulus
+    (the wall of a drilled hole, a pipe, a cone's side: one chart that unrolls without
+    stretch), where a bisection gives two charts and two cuts.
+
+    ``V, F`` are the piece's own vertices and faces, ``vertices`` their indices in the chart;
+    the chart returned has a copy of each vertex on the cut for either side
+    (``Chart.vertices`` repeats them)."""
+    cut = annulus_cut(V, F)
+    if len(cut) == 0:
+        return None
+    F_cut, copy_of = cut_along(F, cut)
+    try:
+        result = _solved(V[copy_of], F_cut, len(faces), cfg, seed)
+    except InvalidMeshError as exc:  # e.g. too thin for the solver's neighbourhoods: split it
+        log.debug("chart %d depth %d, cut open: %s", src, depth, exc)
+        return None
+    if status is not None and "bijective" not in status:
+        status["bijective"] = bool(result.bijective)
+    if not _kept(result, len(faces), cfg):
+        return None
+    log.debug("chart %d depth %d: cut open into one chart", src, depth)
+    return Chart(
+        faces, vertices[copy_of], F_cut, result.uv, result.quality, src, depth, result.method
+    )
 
 
 def chart_face_cover(charts: tuple[Chart, ...], m: int) -> np.ndarray:

@@ -343,3 +343,34 @@ def test_boundary_pieces_are_the_loops():
         assert n == expected
         assert np.array_equal(verts[idx], B)
         assert len(np.unique(piece)) == expected and len(piece) == len(verts)
+
+
+def test_an_annulus_cut_open_along_its_shortest_path_is_a_disk():
+    """``annulus_cut``: the shortest edge path from one loop of a tube to the other (straight up
+    a side); ``cut_along`` it: one loop, Euler characteristic 1, each vertex of the path twice,
+    the faces on copies of their own vertices. A disk has no such cut."""
+    n_theta, n_z = 16, 5
+    theta = 2 * np.pi * np.arange(n_theta) / n_theta
+    z = np.linspace(0.0, 2.0, n_z)  # ring spacing 0.5, longer than the ring's edges (0.39)
+    V = np.stack([np.cos(theta)[None].repeat(n_z, 0), np.sin(theta)[None].repeat(n_z, 0),
+                  z[:, None].repeat(n_theta, 1)], -1).reshape(-1, 3)  # fmt: skip
+    i, j = (a.ravel() for a in np.meshgrid(np.arange(n_z - 1), np.arange(n_theta), indexing="ij"))
+    a, b = i * n_theta + j, i * n_theta + (j + 1) % n_theta
+    F = np.concatenate(
+        [np.stack([a, b, b + n_theta], 1), np.stack([a, b + n_theta, a + n_theta], 1)]
+    )
+    cut = mesh.annulus_cut(V, F)
+    assert len(cut) == n_z - 1
+    assert np.allclose(np.linalg.norm(V[cut[:, 0]] - V[cut[:, 1]], axis=1), 0.5)
+    ends = np.setdiff1d(cut.ravel(), np.intersect1d(cut[:, 0], cut[:, 1]))
+    assert sorted(V[ends, 2].tolist()) == [0.0, 2.0]  # one end on each loop
+    F_cut, src = mesh.cut_along(F, cut)
+    assert np.array_equal(src[F_cut], F)
+    assert len(src) == len(V) + n_z and len(mesh.boundary_loops(F_cut)) == 1
+    assert mesh.euler_characteristic(F_cut) == 1 and mesh.is_disk(F_cut, holes=False)
+    assert np.array_equal(np.bincount(src, minlength=len(V)) == 2, np.isin(np.arange(len(V)), cut))
+    # uncut: the same mesh; a disk: no cut
+    F_same, src_same = mesh.cut_along(F, np.zeros((0, 2), dtype=np.int64))
+    assert np.array_equal(src_same[F_same], F) and len(src_same) == len(V)
+    Vd, Fd = tri_grid(5, 5)
+    assert mesh.annulus_cut(Vd, Fd).shape == (0, 2)

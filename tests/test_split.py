@@ -300,27 +300,36 @@ def test_tubes_are_told_from_washers_and_disks():
     assert _tubes(V, F, face_chart, 4).tolist() == [True, False, False, True]
 
 
-def test_a_tube_is_split_without_a_solve(monkeypatch):
-    """The wall of a drilled hole is cut without the solver ever seeing it whole: every chart
-    the solver gets (batched or alone) has fewer faces than the tube, and the pieces are
-    bijective and cover it."""
+@pytest.mark.parametrize("batched", [True, False], ids=["batched", "alone"])
+def test_a_tube_is_cut_open_into_one_chart(monkeypatch, batched):
+    """The wall of a drilled hole is never solved as it is (its map would fold): the solver only
+    sees it cut open along one path between its loops, a disk, and keeps it as one chart (one
+    cut, where a bisection gave two charts and two cuts), whether it goes through the batched
+    path or alone (too big for a batch). Its vertices on the cut come twice."""
     import segparam.split as split
+    from segparam.mesh import boundary_loops
 
     V, F = _tube(n_theta=32, n_z=6)
-    sizes = []
-    batched, alone = split.solve_charts, split.parameterize_chart
+    loops = []
+    batched_solver, alone = split.solve_charts, split.parameterize_chart
 
     def spy_batch(V, F, vert_chart, **kw):
-        sizes.extend(np.bincount(vert_chart[F[:, 0]]).tolist())
-        return batched(V, F, vert_chart, **kw)
+        face_chart = vert_chart[F[:, 0]]
+        loops.extend(len(boundary_loops(F[face_chart == c])) for c in np.unique(face_chart))
+        return batched_solver(V, F, vert_chart, **kw)
 
     def spy_alone(V, F, **kw):
-        sizes.append(len(F))
+        loops.append(len(boundary_loops(F)))
         return alone(V, F, **kw)
 
     monkeypatch.setattr(split, "solve_charts", spy_batch)
     monkeypatch.setattr(split, "parameterize_chart", spy_alone)
+    if not batched:
+        monkeypatch.setattr(split, "BATCH_MAX_VERTICES", 10)
     out = parameterize_charts(V, F, np.zeros(len(F), dtype=np.int64), config=SplitConfig(n_jobs=1))
-    assert sizes and max(sizes) < len(F)
+    assert loops == [1]
+    (chart,) = out.charts
+    assert chart.quality.bijective and chart.quality.l2_stretch < 1.001
+    assert np.array_equal(chart.vertices[chart.local_F], F[chart.faces])
+    assert len(chart.vertices) == len(V) + 6  # the cut: 6 vertices from loop to loop, twice
     assert np.array_equal(chart_face_cover(out.charts, len(F)), np.ones(len(F)))
-    assert all(c.quality.bijective for c in out.charts)
