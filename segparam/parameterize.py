@@ -146,6 +146,13 @@ MAXMIN_CANDIDATES = 10
 #: ``FOLD_MIN_COS`` 232 / 233 / 234 / 234 / 235 / 235 / 234 / 228 of 255. Any threshold from
 #: 0.65 to 0.85 is as good overall; 0.65 and 0.7 bring all three sets to 86 or more.
 DEPENDENT_R2 = 0.7
+#: The first eigenvector is the constant when its overlap with ``1 / sqrt(n)`` is at least
+#: ``1 - CONSTANT_FIRST_TOL`` (as it comes from LAPACK: 1 - 1e-15 or closer); below, the null
+#: space is mixed (:func:`_constant_first`).
+CONSTANT_FIRST_TOL = 1e-8
+#: A column of :func:`explained_by_first`'s polynomial design whose part not in the lower
+#: powers is smaller than this fraction of its norm is dropped (a power of a few-valued h1).
+POLY_RANK_TOL = 1e-8
 DEPENDENT_DEGREE = 4
 
 
@@ -841,7 +848,13 @@ def explained_by_first(vectors: np.ndarray) -> np.ndarray:
     X = vectors - vectors.mean(axis=1, keepdims=True)
     h1, H = X[:, :, 1], X[:, :, 2:]
     x = h1 / np.maximum(np.sqrt((h1**2).mean(axis=1, keepdims=True)), 1e-300)
-    Q = np.linalg.qr(x[:, :, None] ** np.arange(DEPENDENT_DEGREE + 1))[0]  # (g, s, degree + 1)
+    A = x[:, :, None] ** np.arange(DEPENDENT_DEGREE + 1)
+    Q, R = np.linalg.qr(A)  # (g, s, degree + 1)
+    # A power of h1 that the lower ones already give (h1 takes only a few values, as across a
+    # one-row strip where x^2 = 1) leaves a residual of rounding noise, which QR would blow up
+    # into a column that "explains" anything: such columns are dropped.
+    power = np.abs(np.diagonal(R, axis1=1, axis2=2))
+    Q = Q * (power > POLY_RANK_TOL * np.linalg.norm(A, axis=1))[:, None, :]
     residual = H - Q @ (Q.transpose(0, 2, 1) @ H)
     return 1 - (residual**2).sum(axis=1) / np.maximum((H**2).sum(axis=1), 1e-300)
 
@@ -850,11 +863,37 @@ def _select(vectors: np.ndarray, more) -> np.ndarray:
     """``vectors`` (the three smallest, ``(g, s, 3)``) with the second coordinate replaced by the
     third where it is explained by the first above ``DEPENDENT_R2`` and the third is less so.
     ``more(b)`` gives chart ``b``'s four smallest eigenvectors (``(s, 4)``)."""
-    vectors = vectors.copy()
+    vectors = _constant_first(vectors)
     for b in np.flatnonzero(explained_by_first(vectors)[:, 0] > DEPENDENT_R2):  # rare
-        four = more(b)
+        four = _constant_first(more(b)[None])[0]
         if _second(explained_by_first(four[None])[0]) == 2:
             vectors[b] = four[:, [0, 1, 3]]
+    return vectors
+
+
+def _constant_first(vectors: np.ndarray) -> np.ndarray:
+    """The smallest eigenvectors ``(g, s, k)`` (a copy), each stack with the constant first and
+    the others in order, orthonormal to it.
+
+    ``K`` maps constants to 0, and usually the constant is the first eigenvector as it comes.
+    When another function is as exactly in the null space (a developable chart's linear
+    coordinate, e.g. a cylinder's wall cut open), the eigensolver returns any rotation of the
+    two: the constant is then put first and the other vectors, in order, orthogonalized against
+    it and each other, the one that only held the constant's part dropped. (Read as it came, the
+    mixture made :func:`explained_by_first` measure the wrong coordinate: the 6 one-row hole
+    walls of the CAD plate, cut open, all took the wrong pair and needed the fallback pairs.)
+    """
+    vectors = vectors.copy()
+    s, k = vectors.shape[1:]
+    c = np.full(s, 1.0 / np.sqrt(s))
+    mixed = np.abs(vectors[:, :, 0] @ c) < 1.0 - CONSTANT_FIRST_TOL
+    for b in np.flatnonzero(mixed):  # loop over the charts (rare) whose null space is mixed
+        basis = [c]
+        for v in vectors[b].T:  # k vectors: keep the k - 1 that add a direction
+            w = v - np.column_stack(basis) @ (np.column_stack(basis).T @ v)
+            if len(basis) < k and np.linalg.norm(w) > 0.5:
+                basis.append(w / np.linalg.norm(w))
+        vectors[b] = np.column_stack(basis)
     return vectors
 
 

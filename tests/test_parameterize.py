@@ -603,6 +603,65 @@ def test_explained_by_first_is_the_r2_of_a_function_of_the_first():
     assert np.all((r2 >= 0) & (r2 <= 1 + 1e-12))
 
 
+def test_a_first_coordinate_of_two_values_explains_nothing_it_is_not():
+    """Across a one-row strip the first coordinate takes two values (x^2 = 1): its higher powers
+    add nothing, and the rounding noise left of them must not explain the second coordinate."""
+    from segparam.parameterize import explained_by_first
+
+    rng = np.random.default_rng(1)
+    s = 130
+    h1 = np.where(np.arange(s) % 2 == 0, 1.0, -1.0)
+    h2 = np.repeat(np.linspace(-1.0, 1.0, s // 2), 2)  # along the strip
+    h1_noisy = h1 + 1e-10 * h2 + 1e-12 * rng.normal(size=s)  # an eigensolver's rounding
+    vectors = np.column_stack([np.ones(s), h1_noisy, h2, h1_noisy * 0.5 + h2**2])[None]
+    r2 = explained_by_first(vectors)[0]
+    assert r2[0] < 1e-6  # along the strip: nothing of it is a function of the two rows
+    assert r2[1] == pytest.approx(0.25 / (0.25 + np.var(h2**2) / np.var(h1_noisy)), rel=1e-3)
+
+
+def test_a_mixed_null_space_is_read_with_the_constant_first():
+    """A developable chart's linear coordinate is as exactly in K's null space as the constant,
+    and an eigensolver returns any rotation of the two: the selection reads them with the
+    constant first (the other vectors in order, orthonormal), and leaves a null space that comes
+    with the constant first as it is, bit for bit."""
+    from segparam.parameterize import _constant_first
+
+    rng = np.random.default_rng(2)
+    s = 50
+    c = np.full(s, 1 / np.sqrt(s))
+    basis = np.linalg.qr(np.column_stack([c, rng.normal(size=(s, 3))]))[0]
+    basis[:, 0] = c  # the constant, h1, h2, h3: orthonormal
+    t = 0.6
+    mixed = basis.copy()
+    mixed[:, 0] = np.cos(t) * basis[:, 0] + np.sin(t) * basis[:, 1]
+    mixed[:, 1] = -np.sin(t) * basis[:, 0] + np.cos(t) * basis[:, 1]
+    out = _constant_first(np.stack([mixed, basis]))
+    np.testing.assert_allclose(out[0, :, 0], c, atol=1e-12)
+    for j in range(1, 4):  # each coordinate up to its sign
+        assert abs(out[0, :, j] @ basis[:, j]) == pytest.approx(1.0, abs=1e-12)
+    np.testing.assert_array_equal(out[1], basis)
+
+
+def test_a_one_row_hole_wall_cut_open_maps_from_the_papers_pair():
+    """The wall of a drilled hole one row of triangles high (the CAD plate's), cut open: its
+    null space holds the constant and the height, both exactly; the selection keeps the
+    height and the length round the hole, whose raw map is bijective, so no fallback pair is
+    tried."""
+    import segparam.parameterize as parameterize
+    from segparam.mesh import annulus_cut, cut_along
+
+    n = 64
+    t = 2 * np.pi * np.arange(n) / n
+    V = np.concatenate([np.stack([np.cos(t), np.sin(t), np.full(n, z)], 1) for z in (-0.8, 0.8)])
+    a, b = np.arange(n), (np.arange(n) + 1) % n
+    F = np.concatenate([np.stack([a, b, b + n], 1), np.stack([a, b + n, a + n], 1)])
+    F_cut, src = cut_along(F, annulus_cut(V, F))
+    solver = HessianSolver(V[src], F_cut)
+    assert solver.solve(refine="none").bijective
+    maps = parameterize.solve_charts(V[src], F_cut, np.zeros(len(src), dtype=np.int64))
+    assert maps.quality["bijective"][0] and maps.quality["l2_stretch"][0] < 1.001
+
+
 def test_unfolded_normals_turn_only_planes_that_fold_an_adjacent_triangle():
     # A flat grid (every triangle normal +z) with every normal +z but one, tilted 80 degrees: only
     # that one is turned, towards +z, just past FOLD_MIN_COS (candidates in steps of 1/10).
