@@ -12,12 +12,13 @@ A planar chart (the face of a CAD part) skips the solver: its projection onto it
 exact isometry the solver would return up to a rigid motion (method ``"planar"``). On the CAD
 plate of ``benchmarks/bench_atlas.py`` (28 planar charts) the stage takes 0.8 s instead of 1.6 s.
 
-An annulus (two boundary loops) that is a tube (the wall of a drilled hole, a pipe: its map as
-it is would fold, ``TUBE_TURNING``) or whose map fails is cut open along the shortest edge path
-from one loop to the other and solved as the disk it then is (:func:`_opened`): a developable
-annulus becomes one chart with one cut that unrolls without stretch, where a bisection gives two
-charts and two cuts. The chart keeps both copies of the cut's vertices (``Chart.vertices``
-repeats them). If that map fails too, the annulus is bisected as any chart.
+A tube (every boundary loop turning by less than pi: the wall of a drilled hole, a pipe, a cone's
+side, whose map as it is would fold, ``TUBE_TURNING``) with two loops is cut open along the
+shortest edge path from one loop to the other and solved as the disk it then is
+(:func:`_opened`): a developable tube becomes one chart with one cut that unrolls without
+stretch, where a bisection gives two charts and two cuts. The chart keeps both copies of the
+cut's vertices (``Chart.vertices`` repeats them). If that map fails too, or the tube has more
+loops, it is bisected as any chart.
 
 Once every chart meets the targets, a small chart whose distortion sits at one spot (a cone of a
 coarse scan) is bisected again when that removes most of it (:func:`_split_for_gain`,
@@ -140,14 +141,16 @@ GAIN_MAX_FACES = 256
 GAIN_MIN_EXCESS = 0.02
 #: A chart with two or more boundary loops, each turning by less than this in total (the sum
 #: over its vertices of pi minus their corner angles, the discrete geodesic curvature), is a
-#: tube, like the wall of a drilled hole (a straight cylinder's loops turn by 0). A bijective
-#: map to the plane turns its outer loop by 2 pi, so a near-isometric map of a tube folds: it is
-#: not solved as it is (:func:`_tubes`) but cut open into a disk if it has two loops (see
-#: :func:`_opened`), else split. The CAD plate of ``bench_atlas.py``: 6 hole walls
-#: (loops at 0.00 pi), solved in vain every build; the 12 brain pieces with holes that reached
-#: the solver on brain-2k and realistic 2k brains of seeds 1-3 turned by 0.36-2.87 pi at their
-#: outer loop (-1.6 to -2.9 pi inside): none is a tube (BENCHMARKS.md, section 0.1, session 12).
-TUBE_TURNING = np.pi / 4
+#: tube: a drilled hole's wall or a pipe (a straight cylinder's loops turn by 0), a cone's side
+#: (+-2 pi sin of its half-angle). A near-isometric map keeps that turning, and a bijective
+#: planar image of an annulus turns its loops by +-2 pi (a flat washer), so a tube's map as it
+#: is folds: it is not solved so but cut open into a disk if it has two loops
+#: (:func:`_opened`), else split. Half a washer's turning separates the two: the CAD plate's 6
+#: hole walls turn by 0.00 pi, cones' sides by +-0.33-0.60 pi; the brain pieces with holes
+#: whose maps failed (brain-2k and realistic 2k brains of seeds 1-2) have an inner loop at -1.58
+#: to -2.85 pi, and none of them, cut open, mapped within the targets either (pi / 4 until
+#: session 13, when tubes were split instead; BENCHMARKS.md, section 0.1).
+TUBE_TURNING = np.pi
 #: Meshes from this many faces up send whole charts to spawned workers; smaller ones are
 #: parameterized here, sharing their large batches with forked helpers (``_solve_batch``):
 #: starting a spawned worker costs about a second.
@@ -846,8 +849,8 @@ def _bulk_charts(
 
     A chart that fails any of these is not in the result: the per-chart path maps or splits it,
     as before. Where :func:`_try_piece` could only fail the same way (a small chart whose
-    projection folds, a chart the solver mapped outside the targets that is no annulus, a tube
-    of three loops or more), ``rejected[chart]`` is set
+    projection folds, a chart the solver mapped outside the targets, a tube), ``rejected[chart]``
+    is set
     (when given), so that the caller can split it without trying it again; ``bijective[chart]``
     (when given) is set where the solver's map was bijective, kept or not. ``V`` is in the
     stage's unit frame; the charts returned are in mesh indices and units (``uv * size``).
@@ -937,8 +940,7 @@ def _bulk_charts(
     go = solver[cand] & manifold & (topo["loops"] >= 1) & ~planar_ok & ~(c_planar & ~disk)
     holed = np.flatnonzero(go & (topo["loops"] >= 2))
     # Tubes are not solved as they are: one of two loops is cut open into a disk and solved with
-    # the others (as _opened does alone), one of more loops is split. An annulus whose map fails
-    # here gets that one more try from _try_piece.
+    # the others (as _opened does alone), one of more loops is split.
     annulus = topo["loops"] == 2
     opened, cuts = np.zeros(0, dtype=np.int64), []
     if len(holed):
@@ -983,9 +985,7 @@ def _bulk_charts(
                 out[src] = ([Chart(rows, verts[copy_of], F_cut, uv, quality, src, 0, "hessian")],
                             True)  # fmt: skip
         if rejected is not None:
-            # an annulus solved as it is gets one more try (cut open) from _try_piece
-            retry = np.r_[annulus[take], np.zeros(len(opened), dtype=bool)]
-            rejected[cand[np.r_[take, opened][~ok & ~retry]]] = True
+            rejected[cand[np.r_[take, opened][~ok]]] = True
         if bijective is not None:
             bijective[cand[np.r_[take, opened][q["bijective"]]]] = True
     return out
@@ -1309,7 +1309,7 @@ def _try_piece(
             return Chart(
                 faces, vertices, local_F, result.uv, result.quality, src, depth, result.method
             )
-        return _opened(Vl, local_F, faces, vertices, src, depth, cfg, seed, status)
+        return None
     if len(faces) > 1 and not is_disk(local_F):
         return None
     uv = project_chart(Vl, local_F)
@@ -1354,12 +1354,12 @@ def _opened(
     seed: int,
     status: dict | None,
 ) -> Chart | None:
-    """An annulus piece (two boundary loops: a tube, or a piece whose map as it is failed) cut
-    open along the shortest edge path from one loop to the other (:func:`segparam.mesh.
-    annulus_cut`) and solved as the disk it then is; None if it is no annulus or that map is
-    not kept (the caller splits it). One cut is the whole answer for a developable annulus
-    (the wall of a drilled hole, a pipe, a cone's side: one chart that unrolls without
-    stretch), where a bisection gives two charts and two cuts.
+    """A tube piece (:func:`_tubes`) cut open along the shortest edge path from one of its
+    two boundary loops to the other (:func:`segparam.mesh.annulus_cut`) and solved as the disk
+    it then is; None if it has not two loops or that map is not kept (the caller splits it).
+    One cut is the whole answer for a developable tube (the wall of a drilled hole, a pipe, a
+    cone's side: one chart that unrolls without stretch), where a bisection gives two charts
+    and two cuts.
 
     ``V, F`` are the piece's own vertices and faces, ``vertices`` their indices in the chart;
     the chart returned has a copy of each vertex on the cut for either side
