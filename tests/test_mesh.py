@@ -1,5 +1,7 @@
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from meshes import spherical_cap, tri_grid
 
 from segparam import mesh
@@ -374,3 +376,35 @@ def test_an_annulus_cut_open_along_its_shortest_path_is_a_disk():
     assert np.array_equal(src_same[F_same], F) and len(src_same) == len(V)
     Vd, Fd = tri_grid(5, 5)
     assert mesh.annulus_cut(Vd, Fd).shape == (0, 2)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    n_around=st.integers(3, 24),
+    n_along=st.integers(1, 6),
+    r_top=st.floats(0.2, 2.0),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_any_tube_cut_open_is_a_disk(n_around, n_along, r_top, seed):
+    """Tubes of any size, down to one row and three sides, cones included, their vertices
+    jittered: the cut runs from loop to loop, and the mesh cut along it is a disk on copies of
+    its vertices, each vertex of the cut twice."""
+    rng = np.random.default_rng(seed)
+    t = 2 * np.pi * np.arange(n_around) / n_around
+    z = np.linspace(0.0, 1.0, n_along + 1)
+    r = 1.0 + (r_top - 1.0) * z
+    V = np.stack(
+        [np.outer(r, np.cos(t)), np.outer(r, np.sin(t)), np.repeat(z[:, None], n_around, 1)], -1
+    ).reshape(-1, 3)
+    V += 0.02 * rng.uniform(-1, 1, V.shape)
+    i, j = (a.ravel() for a in np.meshgrid(np.arange(n_along), np.arange(n_around), indexing="ij"))
+    a, b = i * n_around + j, i * n_around + (j + 1) % n_around
+    F = np.concatenate(
+        [np.stack([a, b, b + n_around], 1), np.stack([a, b + n_around, a + n_around], 1)]
+    )
+    cut = mesh.annulus_cut(V, F)
+    assert len(cut) >= 1 and len(np.unique(cut)) == len(cut) + 1  # a simple path
+    F_cut, src = mesh.cut_along(F, cut)
+    assert np.array_equal(src[F_cut], F)
+    assert mesh.euler_characteristic(F_cut) == 1 and len(mesh.boundary_loops(F_cut)) == 1
+    assert np.array_equal(np.bincount(src, minlength=len(V)) == 2, np.isin(np.arange(len(V)), cut))
