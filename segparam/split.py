@@ -257,7 +257,9 @@ class Chart:
     faces : (k,) int64 ndarray
         Indices into the mesh's ``F``.
     vertices : (n,) int64 ndarray
-        Mesh vertex of each local vertex; ``F[faces]`` equals ``vertices[local_F]``.
+        Mesh vertex of each local vertex; ``F[faces]`` equals ``vertices[local_F]``. A mesh
+        vertex can come twice: on the seam of a tube cut open into one chart, a copy for
+        either side (the faces across the seam do not share it).
     local_F : (k, 3) int64 ndarray
         The chart's faces in local vertex indices.
     uv : (n, 2) float64 ndarray
