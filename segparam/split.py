@@ -605,10 +605,16 @@ def _split_for_gain(
         owner = np.repeat(np.arange(len(cand)), [len(parts) for parts in groups])
         labels = np.zeros(len(F), dtype=np.int64)
         labels[order] = np.repeat(np.arange(len(bounds) - 1), np.diff(bounds))
-        mapped = _map_groups(V, F, labels, order, bounds, cfg, seed, size, affinity, helpers)
+        skip = functools.partial(_hopeless, owner=owner, ex=ex[cand], area=area, cfg=cfg)
+        mapped = _map_groups(
+            V, F, labels, order, bounds, cfg, seed, size, affinity, helpers, skip=skip
+        )
         now: list[list[Chart]] = [[c] for c in charts]  # what each chart becomes, in place
         done = tried.tolist()
         for k, i in enumerate(cand.tolist()):  # loop over the charts bisected
+            if any(mapped[g] is None for g in np.flatnonzero(owner == k)):
+                done[i] = True  # its bisection fails the test: not mapped to the end
+                continue
             parent = charts[i]
             pieces = [
                 dataclasses.replace(p, source=parent.source, depth=parent.depth + 1 + p.depth)
@@ -623,6 +629,24 @@ def _split_for_gain(
         charts = [c for chart in now for c in chart]
 
 
+def _hopeless(
+    first: dict, *, owner: np.ndarray, ex: np.ndarray, area: np.ndarray, cfg: SplitConfig
+) -> np.ndarray:
+    """:func:`_split_for_gain`'s groups not worth mapping past the batched pass: the bisection
+    of their chart (``owner``, whose excess is ``ex``) fails the test whatever they become,
+    by what its groups mapped there already hold (``first``: group -> (pieces, first pass)):
+    every piece still to come adds excess and a chart. The atlas is the one mapping them all
+    would give; the pass saves their rounds (brain-2k: 0.05 s of its 0.16 s)."""
+    known = np.zeros(len(ex))
+    count = np.bincount(owner, minlength=len(ex)).astype(np.float64)  # pieces, at least
+    for g, (pieces, _) in first.items():  # loop over the groups mapped
+        known[owner[g]] += _excess(pieces, area).sum()
+        count[owner[g]] += len(pieces) - 1
+    bound = np.maximum(cfg.min_split_gain * (count - 1), GAIN_MIN_SHARE * ex)
+    lost = ex - known < bound * (1 - 1e-9)  # a margin for the sums' rounding
+    return lost[owner]
+
+
 def _map_groups(
     V: np.ndarray,
     F: np.ndarray,
@@ -634,21 +658,25 @@ def _map_groups(
     size: float,
     affinity: _MeshAffinity,
     helpers: Helpers | None = None,
-) -> list[list[Chart]]:
+    skip: Callable[[dict], np.ndarray] | None = None,
+) -> list[list[Chart] | None]:
     """The charts of each face group ``order[bounds[g] : bounds[g + 1]]`` (``labels[order]`` its
     group), mapped as :func:`parameterize_charts` maps segmentation charts (in bulk where it can,
     then round by round, in this process): in mesh indices and units; ``source`` and ``depth``
-    are the group's and the depth below it."""
+    are the group's and the depth below it. ``skip(first)``, given the groups the bulk pass
+    mapped (group -> (charts, first pass)), says which of the others not to map further: None
+    for those."""
     n = len(bounds) - 1
     sources = [order[bounds[s] : bounds[s + 1]] for s in range(n)]
     sub = _submeshes(F, labels, order, bounds)
     rejected, bijective = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
     final = _bulk_charts(V, F, sub, order, bounds, cfg, size, rejected, bijective, helpers=helpers)
-    rest = [s for s in range(n) if s not in final]
+    skipped = np.zeros(n, dtype=bool) if skip is None else skip(final)
+    rest = [s for s in range(n) if s not in final and not skipped[s]]
     results = _solve_in_rounds(
         V, F, rest, sources, sub, affinity, cfg, seed, size, rejected, bijective, None, 0, helpers
     )
-    out = [final[s][0] if s in final else [] for s in range(n)]
+    out: list[list[Chart] | None] = [final[s][0] if s in final else None for s in range(n)]
     for s in rest:
         out[s] = _in_mesh(results[s][0], sources[s], sub.of(s)[0], size)
     return out
