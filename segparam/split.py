@@ -875,15 +875,17 @@ def _bulk_charts(
     * otherwise, with the ``"hessian"`` solver, at most ``BATCH_MAX_VERTICES`` vertices and
       everything :func:`segparam.parameterize.check_chart` asks: solved together with the others
       (:func:`segparam.parameterize.solve_charts`), kept if bijective and within
-      ``max_distortion`` and ``max_stretch``: ``"hessian"``.
+      ``max_distortion`` and ``max_stretch``: ``"hessian"``;
+    * a tube (:func:`_tubes`) with two loops: cut open into a disk and solved with the others
+      (what :func:`_opened` does alone); a tube of more loops is not tried.
 
     A chart that fails any of these is not in the result: the per-chart path maps or splits it,
     as before. Where :func:`_try_piece` could only fail the same way (a small chart whose
     projection folds, a chart the solver mapped outside the targets, a tube), ``rejected[chart]``
-    is set
-    (when given), so that the caller can split it without trying it again; ``bijective[chart]``
-    (when given) is set where the solver's map was bijective, kept or not. ``V`` is in the
-    stage's unit frame; the charts returned are in mesh indices and units (``uv * size``).
+    is set (when given), so that the caller can split it without trying it again;
+    ``bijective[chart]`` (when given) is set where the solver's map was bijective, kept or not.
+    ``V`` is in the stage's unit frame; the charts returned are in mesh indices and units (``uv
+    * size``).
 
     Returns
     -------
