@@ -151,6 +151,12 @@ GAIN_MIN_EXCESS = 0.02
 #: to -2.85 pi, and none of them, cut open, mapped within the targets either (pi / 4 until
 #: session 13, when tubes were split instead; BENCHMARKS.md, section 0.1).
 TUBE_TURNING = np.pi
+#: A tube whose loops are on average longer than this many times the cut between them is not
+#: opened but split: as one strip it would bind the texture's side wherever it is the longest
+#: chart. A bushing's walls (loops 3.1 and 6.3 around, 0.3 apart) opened into strips of 10:1 and
+#: 21:1 took its atlas's utilization from 0.556 to 0.189; a plain cylinder (2.1:1), cones' sides
+#: (1.3:1), the CAD plate's hole walls (3.8:1) and a pipe (3.1:1) open.
+TUBE_MAX_ASPECT = 6.0
 #: Meshes from this many faces up send whole charts to spawned workers; smaller ones are
 #: parameterized here, sharing their large batches with forked helpers (``_solve_batch``):
 #: starting a spawned worker costs about a second.
@@ -983,7 +989,12 @@ def _bulk_charts(
             rejected[cand[tube[~annulus[tube]]]] = True
         for c in tube[annulus[tube]].tolist():  # loop over the tubes (a few): one cut each
             verts, local_F = sub.of(int(cand[c]))
-            F_cut, copy_of = cut_along(local_F, annulus_cut(V[verts], local_F))
+            cut = _tube_cut(V[verts], local_F)
+            if cut is None:  # too long a strip once open: split, as _try_piece would
+                if rejected is not None:
+                    rejected[cand[c]] = True
+                continue
+            F_cut, copy_of = cut_along(local_F, cut)
             if len(copy_of) <= DENSE_LIMIT:  # else _try_piece solves it alone
                 opened = np.r_[opened, c]
                 cuts.append((V[verts[copy_of]], F_cut, copy_of))
@@ -1375,6 +1386,21 @@ def _kept(result, n_faces: int, cfg: SplitConfig) -> bool:
     )
 
 
+def _tube_cut(V: np.ndarray, F: np.ndarray) -> np.ndarray | None:
+    """The cut that opens a tube of two loops (:func:`segparam.mesh.annulus_cut`), or None if
+    it has not two loops or would open into a strip longer than ``TUBE_MAX_ASPECT`` times its
+    width (its loops' mean length over the cut's)."""
+    cut = annulus_cut(V, F)
+    if len(cut) == 0:
+        return None
+    B = boundary_edges(F)
+    _, idx, n_loops, loop = boundary_pieces(B)
+    length = np.linalg.norm(V[B[:, 0]] - V[B[:, 1]], axis=1)
+    around = np.bincount(loop[idx[:, 0]], weights=length, minlength=n_loops).mean()
+    across = np.linalg.norm(V[cut[:, 0]] - V[cut[:, 1]], axis=1).sum()
+    return cut if around <= TUBE_MAX_ASPECT * across else None
+
+
 def _opened(
     V: np.ndarray,
     F: np.ndarray,
@@ -1396,8 +1422,8 @@ def _opened(
     ``V, F`` are the piece's own vertices and faces, ``vertices`` their indices in the chart;
     the chart returned has a copy of each vertex on the cut for either side
     (``Chart.vertices`` repeats them)."""
-    cut = annulus_cut(V, F)
-    if len(cut) == 0:
+    cut = _tube_cut(V, F)
+    if cut is None:
         return None
     F_cut, copy_of = cut_along(F, cut)
     try:

@@ -309,7 +309,7 @@ def test_a_tube_is_cut_open_into_one_chart(monkeypatch, batched):
     import segparam.split as split
     from segparam.mesh import boundary_loops
 
-    V, F = _tube(n_theta=32, n_z=6)
+    V, F = _tube(n_theta=32, n_z=6, height=1.5)  # 6.3 round, 1.5 high: opens into 4.2:1
     loops = []
     batched_solver, alone = split.solve_charts, split.parameterize_chart
 
@@ -333,6 +333,24 @@ def test_a_tube_is_cut_open_into_one_chart(monkeypatch, batched):
     assert np.array_equal(chart.vertices[chart.local_F], F[chart.faces])
     assert len(chart.vertices) == len(V) + 6  # the cut: 6 vertices from loop to loop, twice
     assert np.array_equal(chart_face_cover(out.charts, len(F)), np.ones(len(F)))
+
+
+@pytest.mark.parametrize("batched", [True, False], ids=["batched", "alone"])
+def test_a_tube_too_long_to_open_is_split(monkeypatch, batched):
+    """A bushing's wall, 6.3 round and 0.3 high, would open into a 21:1 strip that binds the
+    texture's side (TUBE_MAX_ASPECT): it is split into pieces that share no vertex twice."""
+    import segparam.split as split
+
+    V, F = _tube(n_theta=32, n_z=3, height=0.3)
+    if not batched:
+        monkeypatch.setattr(split, "BATCH_MAX_VERTICES", 10)
+    out = parameterize_charts(V, F, np.zeros(len(F), dtype=np.int64), config=SplitConfig(n_jobs=1))
+    assert len(out.charts) >= 2
+    assert all(len(np.unique(c.vertices)) == len(c.vertices) for c in out.charts)
+    assert all(c.quality.bijective for c in out.charts)
+    assert np.array_equal(chart_face_cover(out.charts, len(F)), np.ones(len(F)))
+    monkeypatch.setattr(split, "TUBE_MAX_ASPECT", 30.0)  # allowed: one chart
+    assert len(parameterize_charts(V, F, np.zeros(len(F), dtype=np.int64)).charts) == 1
 
 
 def test_the_gain_pass_skips_only_bisections_that_fail_anyway(monkeypatch):
