@@ -41,6 +41,11 @@ default (adds)
 
 ``brain-60k``, ``brain-100k``
     ``brain_like_surface(n)``.
+``cylinder``, ``bushing``, ``pipe``
+    Turned CAD parts, ``trimesh.creation`` solids subdivided twice: a capped cylinder (radius
+    1, height 3, 48 sections; 3,072 faces), a bushing (``annulus``: radii 0.5 and 1, height
+    0.3; 6,144 faces) and a pipe (``annulus``: radii 0.8 and 1, height 2, 64 sections; 8,192
+    faces). Their walls are tubes: one opened into one chart, the bushing's too long to open.
 
 ``--large``: ``brain-300k``; ``--huge``: ``brain-300k`` and ``brain-1m`` (1,000,000 faces).
 
@@ -262,6 +267,19 @@ def fsaverage5_pial() -> tuple[np.ndarray, np.ndarray]:
     raise Unavailable(f"no bundled fsaverage5 pial surface in {folder}")
 
 
+def turned_part(kind: str) -> tuple[np.ndarray, np.ndarray]:
+    """The CAD parts of the default group (see the module docstring), subdivided twice."""
+    import trimesh
+
+    m = {
+        "cylinder": lambda: trimesh.creation.cylinder(radius=1.0, height=3.0, sections=48),
+        "bushing": lambda: trimesh.creation.annulus(r_min=0.5, r_max=1.0, height=0.3, sections=48),
+        "pipe": lambda: trimesh.creation.annulus(r_min=0.8, r_max=1.0, height=2.0, sections=64),
+    }[kind]()
+    m = m.subdivide().subdivide()
+    return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
+
+
 # name -> (group, builder); groups: quick, default, large, huge (each adds to the one before)
 MESHES: dict[str, tuple[str, Callable[[], tuple[np.ndarray, np.ndarray]]]] = {
     "brain-2k": ("quick", lambda: brain_like_surface(2_000)),
@@ -276,6 +294,9 @@ MESHES: dict[str, tuple[str, Callable[[], tuple[np.ndarray, np.ndarray]]]] = {
     "wavy-sheet": ("quick", wavy_sheet),
     "brain-60k": ("default", lambda: brain_like_surface(60_000)),
     "brain-100k": ("default", lambda: brain_like_surface(100_000)),
+    "cylinder": ("default", lambda: turned_part("cylinder")),
+    "bushing": ("default", lambda: turned_part("bushing")),
+    "pipe": ("default", lambda: turned_part("pipe")),
     "brain-300k": ("large", lambda: brain_like_surface(300_000)),
     "brain-1m": ("huge", lambda: brain_like_surface(1_000_000)),
 }
