@@ -1785,6 +1785,19 @@ def _refine_charts(
     return uv, q, use_r
 
 
+def _sub_union(F, vstart, size, fstart, n_faces, charts):
+    """Some charts of a :func:`solve_charts` union (``charts``: their positions, a chart twice
+    gives two copies) as a union of their own: ``(verts, faces, F_sub, vert_chart, sub_vstart)``,
+    the union's vertex and face of each of its vertices and faces, its faces in its own
+    indices, each vertex's chart (position in ``charts``) and each chart's first vertex."""
+    verts = np.concatenate([np.arange(vstart[c], vstart[c] + size[c]) for c in charts])
+    faces = np.concatenate([np.arange(fstart[c], fstart[c] + n_faces[c]) for c in charts])
+    sub_vstart = np.r_[0, np.cumsum(size[charts])[:-1]]
+    F_sub = F[faces] - np.repeat(vstart[charts] - sub_vstart, n_faces[charts])[:, None]
+    vert_chart = np.repeat(np.arange(len(charts)), size[charts])
+    return verts, faces, F_sub, vert_chart, sub_vstart
+
+
 def _some_charts_quality(Vn, F, uv, vert_chart, vstart, n_faces, frames, which, like):
     """:func:`charts_quality` of the charts ``which`` (a boolean mask) of a :func:`solve_charts`
     union, measured on those charts alone; the other charts' entries are ``like``'s."""
@@ -1796,12 +1809,8 @@ def _some_charts_quality(Vn, F, uv, vert_chart, vstart, n_faces, frames, which, 
         return out
     size = np.diff(np.r_[vstart, len(Vn)])
     fstart = np.r_[0, np.cumsum(n_faces)[:-1]]
-    verts = np.concatenate([np.arange(vstart[c], vstart[c] + size[c]) for c in todo])
-    faces = np.concatenate([np.arange(fstart[c], fstart[c] + n_faces[c]) for c in todo])
-    local = np.empty(len(Vn), dtype=np.int64)
-    local[verts] = np.arange(len(verts))
-    vc = np.repeat(np.arange(len(todo)), size[todo])
-    some = charts_quality(Vn[verts], local[F[faces]], uv[verts], vc, len(todo), frames[faces])
+    verts, faces, F_sub, vc, _ = _sub_union(F, vstart, size, fstart, n_faces, todo)
+    some = charts_quality(Vn[verts], F_sub, uv[verts], vc, len(todo), frames[faces])
     for k in out:
         out[k][todo] = some[k]
     return out
@@ -1840,12 +1849,8 @@ def _fallback_pairs(Vn, F, K, vstart, fstart, frames, uv, q, refined, starved, a
     if not cand:
         return
     todo = np.array([c for c, _ in cand])
-    verts = np.concatenate([np.arange(vstart[c], vstart[c] + size[c]) for c in todo])
-    faces = np.concatenate([np.arange(fstart[c], fstart[c] + n_faces[c]) for c in todo])
+    verts, faces, f_local, vc, first = _sub_union(F, vstart, size, fstart, n_faces, todo)
     n_v = size[todo]
-    first = np.r_[0, np.cumsum(n_v)[:-1]]
-    vc = np.repeat(np.arange(len(todo)), n_v)
-    f_local = F[faces] - np.repeat(vstart[todo] - first, n_faces[todo])[:, None]  # in the copy
     uv_t, q_t, _ = _refine_charts(
         Vn[verts], f_local, np.concatenate([starts[c][t] for c, t in cand]), vc, first,
         n_faces[todo], frames[faces], refine, refine_iterations, angle_weight,
