@@ -22,7 +22,17 @@ from scipy.sparse.csgraph import connected_components as _cc
 from scipy.spatial import cKDTree
 
 from .errors import InvalidMeshError
-from .mesh import check_mesh, cross_into, edge_half_edges, edges, face_areas, mesh_arrays
+from .mesh import (
+    check_mesh,
+    cross_into,
+    edge_half_edges,
+    edges,
+    face_areas,
+    mesh_arrays,
+    next_half_edge,
+    prev_half_edge,
+    split_corners,
+)
 
 __all__ = [
     "REASON_DUPLICATE",
@@ -474,16 +484,6 @@ def _apart(P: np.ndarray, tol: float) -> bool:
     return not np.any(d.max(axis=1, initial=0.0) <= width)
 
 
-def _next(h: np.ndarray) -> np.ndarray:
-    """Half-edge after ``h`` in its face (it starts where ``h`` ends)."""
-    return h - h % 3 + (h % 3 + 1) % 3
-
-
-def _prev(h: np.ndarray) -> np.ndarray:
-    """Half-edge before ``h`` in its face (it ends where ``h`` starts)."""
-    return h - h % 3 + (h % 3 + 2) % 3
-
-
 def _pair_keys(pairs: np.ndarray, m: int) -> np.ndarray:
     P = np.sort(pairs, axis=1)
     return P[:, 0] * (3 * m) + P[:, 1]
@@ -528,49 +528,6 @@ def _glue_pairs(F: np.ndarray, table: tuple | None = None) -> tuple[np.ndarray, 
     return glue, int(np.count_nonzero(count > 2)), table
 
 
-def _split_corners(F: np.ndarray, glue: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """One vertex per fan: corners of a vertex joined through glued edges share a vertex.
-
-    Returns
-    -------
-    Fs : (m, 3) int64 ndarray
-        Faces on the new vertices.
-    src : (n', ) int64 ndarray
-        Old vertex of each new vertex. The first copy of every old vertex comes first, in old
-        order; extra copies follow, by old vertex.
-    """
-    m = len(F)
-    flat = F.ravel()
-    ha, hb = glue[:, 0], glue[:, 1]
-    na, nb = _next(ha), _next(hb)
-    same = flat[ha] == flat[hb]
-    if not same.any() and 3 * m < 2**31:
-        # Every glued edge is run both ways: corner c's fan goes on at the next corner of the
-        # face across c's edge, one neighbour per corner (itself where c's edge is not glued).
-        # So the graph is CSR as it stands, one entry per row: no conversion from pairs
-        # (_split_corners 0.30 -> 0.24 s at 1M faces, the same components).
-        nbr = np.arange(3 * m, dtype=np.int32)
-        nbr[ha], nbr[hb] = nb, na
-        G = sp.csr_matrix(
-            (np.ones(3 * m), nbr, np.arange(3 * m + 1, dtype=np.int32)), shape=(3 * m, 3 * m)
-        )
-    else:
-        rows = np.concatenate([ha, na])
-        cols = np.concatenate([np.where(same, hb, nb), np.where(same, nb, hb)])
-        G = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * m, 3 * m))
-    k, lab = _cc(G, directed=False)
-    first = np.full(k, 3 * m, dtype=np.int64)
-    np.minimum.at(first, lab, np.arange(3 * m))
-    src = flat[first]
-    o = np.lexsort((first, src))
-    primary = np.ones(k, dtype=bool)
-    primary[1:] = src[o][1:] != src[o][:-1]
-    final = np.concatenate([o[primary], o[~primary]])
-    newid = np.empty(k, dtype=np.int64)
-    newid[final] = np.arange(k)
-    return newid[lab].reshape(m, 3), src[final]
-
-
 def _split(
     F: np.ndarray, glue: np.ndarray, table: tuple | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
@@ -587,14 +544,14 @@ def _split(
     Returns
     -------
     Fs, src
-        As :func:`_split_corners`.
+        As :func:`segparam.mesh.split_corners`.
     glue : (g', 2) int64 ndarray
         The glue pairs that remain.
     table : tuple
         :func:`_edge_table` of ``Fs``.
     """
     while True:
-        Fs, src = _split_corners(F, glue)
+        Fs, src = split_corners(F, glue)
         same = table is not None and np.array_equal(Fs, F)
         split_table = table if same else _edge_table(edges(Fs, ends=True))
         E, h2e, count = split_table[:3]
@@ -613,7 +570,7 @@ def _split(
         idx = np.arange(len(e))
         pos = idx - np.maximum.accumulate(np.where(start, idx, 0))
         extra, e = hbad[pos >= 2], e[pos >= 2]
-        other = np.where(Fs.ravel()[extra] == E[e, 0], _prev(extra), _next(extra))
+        other = np.where(Fs.ravel()[extra] == E[e, 0], prev_half_edge(extra), next_half_edge(extra))
         drop = np.isin(glue, other).any(axis=1)
         logger.debug("clean: %d edges still non-manifold after splitting", len(np.unique(e)))
         if not drop.any():  # cannot happen by construction; do not loop forever

@@ -510,7 +510,8 @@ def test_split_corners_graph_as_csr_gives_the_same_fans():
     import scipy.sparse as sp
     from scipy.sparse.csgraph import connected_components
 
-    from segparam.clean import _glue_pairs, _split_corners
+    from segparam.clean import _glue_pairs
+    from segparam.mesh import split_corners
 
     def reference(F, glue):
         m, flat = len(F), F.ravel()
@@ -539,7 +540,7 @@ def test_split_corners_graph_as_csr_gives_the_same_fans():
             continue
         F = F[rng.permutation(len(F))]
         glue, _, _ = _glue_pairs(F)
-        Fs, src = _split_corners(F, glue)
+        Fs, src = split_corners(F, glue)
         want_F, want_src = reference(F, glue)
         np.testing.assert_array_equal(Fs, want_F)
         np.testing.assert_array_equal(src, want_src)
