@@ -47,6 +47,13 @@ STOP_JOIN_SECONDS = 10.0
 MAX_HELPERS = 3
 
 
+def may_start_processes() -> bool:
+    """Whether this process may have children: not a daemonic one (a ``multiprocessing`` pool's
+    worker, where starting a process fails with "daemonic processes are not allowed to have
+    children")."""
+    return not multiprocessing.current_process().daemon
+
+
 def fork_available() -> bool:
     """Whether helpers can be forked here: Linux with the ``fork`` start method, called from the
     main thread (another thread may hold a lock the fork would copy locked: a caller running
@@ -56,7 +63,7 @@ def fork_available() -> bool:
         sys.platform.startswith("linux")
         and "fork" in multiprocessing.get_all_start_methods()
         and threading.current_thread() is threading.main_thread()
-        and not multiprocessing.current_process().daemon
+        and may_start_processes()
     )
 
 

@@ -52,7 +52,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .cores import Helpers, limit_blas, stop_pool
+from .cores import Helpers, limit_blas, may_start_processes, stop_pool
 from .errors import InvalidMeshError, check_choice, check_int, check_number
 from .linalg import DENSE_LIMIT
 from .mesh import (
@@ -348,9 +348,7 @@ def _sigint_blocked():
 def _jobs(cfg: SplitConfig) -> int:
     """Worker processes the config asks for (``n_jobs``; 0: one per CPU), or 1 in a daemonic
     process (a ``multiprocessing`` pool's worker), which may not start any."""
-    import multiprocessing
-
-    if multiprocessing.current_process().daemon:
+    if not may_start_processes():
         return 1
     return cfg.n_jobs or os.cpu_count() or 1
 
