@@ -41,7 +41,9 @@ footprint by k counter-clockwise quarter turns of its uv frame (see ``pack._turn
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.extending import intrinsic
 
 from segparam.raster import _raster_into, outline_winding
 
@@ -52,6 +54,20 @@ _EMPTY = 1 << 30
 # Columns per block of the skyline's block minima, which let the resting search skip a block of
 # positions at once (16: 64 blocks at 1024 texels).
 _SKY_BLOCK = 16
+
+
+@intrinsic
+def _trailing_zeros(typingctx, word):  # pragma: no cover - compiled
+    """Index of the lowest set bit of a non-zero uint64: one instruction (LLVM's ``cttz``),
+    where a loop testing bit after bit took a third of the "holes" rule's time on 2,000
+    triangles (``perf`` on the compiled trial)."""
+    if word != types.uint64:
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.cttz(args[0], ir.Constant(ir.IntType(1), 1))
+
+    return types.int64(types.uint64), codegen
 
 
 @njit(cache=True, nogil=True)
@@ -550,10 +566,8 @@ def holes(prefix, max_free, free_bits, runs, cr, cc, count):  # pragma: no cover
         for w in range(len(starts)):
             word = starts[w]
             while word:
-                bit = 0
-                while not (word >> np.uint64(bit)) & np.uint64(1):
-                    bit += 1
-                word &= word - np.uint64(1)  # clear the lowest set bit
+                bit = _trailing_zeros(word)  # the lowest set bit
+                word &= word - np.uint64(1)  # clear it
                 j = w * 64 + bit - w0  # the position whose widest run starts at this cell
                 if j < 0 or j > nc - cc or taken[j]:
                     continue

@@ -85,6 +85,24 @@ def test_free_run_starts_from_bit_sets_match_brute_force(seed: int) -> None:
             assert got == want
 
 
+def test_trailing_zeros_is_the_index_of_the_lowest_set_bit() -> None:
+    # the hole search reads the set bits of its 64-cell words lowest first with this intrinsic
+    from numba import njit
+
+    @njit
+    def lowest_bits(words):
+        out = np.empty(len(words), dtype=np.int64)
+        for i in range(len(words)):
+            out[i] = canvas._trailing_zeros(words[i])
+        return out
+
+    rng = np.random.default_rng(0)
+    words = [1 << k for k in range(64)] + [(1 << 64) - 1, 0b1011000, 1 << 63 | 1 << 5]
+    words += rng.integers(1, 2**63, 50, dtype=np.uint64).tolist()
+    want = [(w & -w).bit_length() - 1 for w in words]
+    assert lowest_bits(np.array(words, dtype=np.uint64)).tolist() == want
+
+
 def test_coarse_hole_search_never_misses_a_free_coarse_position() -> None:
     # with 3-texel cells a position is reported only where the coarse footprint meets no
     # forbidden cell, and every such position of the lowest row is reported
