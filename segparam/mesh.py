@@ -706,10 +706,15 @@ def cut_along(F: np.ndarray, cut: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return split_corners(F, np.column_stack([first[glued], last[glued]]))
 
 
-def annulus_cut(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+def annulus_cut(V: np.ndarray, F: np.ndarray, *, boundary: tuple | None = None) -> np.ndarray:
     """The shortest path of edges (3-D length) from one boundary loop of an annulus (a manifold
     mesh with two boundary loops) to the other: the one cut that opens it into a disk
     (:func:`cut_along`). Only its ends are on the boundary.
+
+    Parameters
+    ----------
+    boundary : (B, pieces), optional
+        ``boundary_edges(F)`` and ``boundary_pieces`` of them, if the caller has them.
 
     Returns
     -------
@@ -718,10 +723,10 @@ def annulus_cut(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """
     from scipy.sparse.csgraph import dijkstra
 
-    B = boundary_edges(F)
+    B = boundary_edges(F) if boundary is None else boundary[0]
     if len(B) == 0:
         return np.zeros((0, 2), dtype=np.int64)
-    verts, _, n_loops, loop = boundary_pieces(B)
+    verts, _, n_loops, loop = boundary_pieces(B) if boundary is None else boundary[1]
     if n_loops != 2:
         return np.zeros((0, 2), dtype=np.int64)
     E, _ = edges(F)

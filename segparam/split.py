@@ -1388,11 +1388,12 @@ def _tube_cut(V: np.ndarray, F: np.ndarray) -> np.ndarray | None:
     """The cut that opens a tube of two loops (:func:`segparam.mesh.annulus_cut`), or None if
     it has not two loops or would open into a strip longer than ``TUBE_MAX_ASPECT`` times its
     width (its loops' mean length over the cut's)."""
-    cut = annulus_cut(V, F)
+    B = boundary_edges(F)
+    pieces = boundary_pieces(B) if len(B) else None
+    cut = annulus_cut(V, F, boundary=(B, pieces))
     if len(cut) == 0:
         return None
-    B = boundary_edges(F)
-    _, idx, n_loops, loop = boundary_pieces(B)
+    _, idx, n_loops, loop = pieces
     length = np.linalg.norm(V[B[:, 0]] - V[B[:, 1]], axis=1)
     around = np.bincount(loop[idx[:, 0]], weights=length, minlength=n_loops).mean()
     across = np.linalg.norm(V[cut[:, 0]] - V[cut[:, 1]], axis=1).sum()
