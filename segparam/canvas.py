@@ -41,7 +41,6 @@ footprint by k counter-clockwise quarter turns of its uv frame (see ``pack._turn
 from __future__ import annotations
 
 import numpy as np
-from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
 
@@ -65,7 +64,8 @@ def _trailing_zeros(typingctx, word):  # pragma: no cover - compiled
         return None
 
     def codegen(context, builder, signature, args):
-        return builder.cttz(args[0], ir.Constant(ir.IntType(1), 1))
+        # the flag (an i1 true): a zero word is undefined (the callers never pass one)
+        return builder.cttz(args[0], context.get_constant(types.boolean, True))
 
     return types.int64(types.uint64), codegen
 
