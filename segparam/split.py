@@ -634,18 +634,19 @@ def _split_for_gain(
 
 
 def _hopeless(
-    first: dict, *, owner: np.ndarray, ex: np.ndarray, area: np.ndarray, cfg: SplitConfig
+    known_so_far: dict, *, owner: np.ndarray, ex: np.ndarray, area: np.ndarray, cfg: SplitConfig
 ) -> np.ndarray:
-    """:func:`_split_for_gain`'s groups not worth mapping past the batched pass: the bisection
-    of their chart (``owner``, whose excess is ``ex``) fails the test whatever they become,
-    by what its groups mapped there already hold (``first``: group -> (pieces, first pass)):
-    every piece still to come adds excess and a chart. The atlas is the one mapping them all
-    would give; the pass saves their rounds (brain-2k: 0.05 s of its 0.16 s)."""
+    """:func:`_split_for_gain`'s groups not worth mapping further: the bisection of their chart
+    (``owner``, whose excess is ``ex``) fails the test whatever they become, by what its groups
+    hold so far (``known_so_far``: group -> (pieces mapped, pieces still to map), after the
+    batched pass and after each round): every piece still to come adds excess and a chart
+    (excess is never negative). The atlas is the one mapping them all would give; the pass
+    saves their rounds (brain-2k: 0.05 s of its 0.16 s after the batched pass)."""
     known = np.zeros(len(ex))
     count = np.bincount(owner, minlength=len(ex)).astype(np.float64)  # pieces, at least
-    for g, (pieces, _) in first.items():  # loop over the groups mapped
+    for g, (pieces, pending) in known_so_far.items():  # loop over the groups with news
         known[owner[g]] += _excess(pieces, area).sum()
-        count[owner[g]] += len(pieces) - 1
+        count[owner[g]] += len(pieces) + pending - 1
     bound = np.maximum(cfg.min_split_gain * (count - 1), GAIN_MIN_SHARE * ex)
     lost = ex - known < bound * (1 - 1e-9)  # a margin for the sums' rounding
     return lost[owner]
@@ -667,22 +668,34 @@ def _map_groups(
     """The charts of each face group ``order[bounds[g] : bounds[g + 1]]`` (``labels[order]`` its
     group), mapped as :func:`parameterize_charts` maps segmentation charts (in bulk where it can,
     then round by round, in this process): in mesh indices and units; ``source`` and ``depth``
-    are the group's and the depth below it. ``skip(first)``, given the groups the bulk pass
-    mapped (group -> (charts, first pass)), says which of the others not to map further: None
-    for those."""
+    are the group's and the depth below it. ``skip(known)``, given what the groups hold so far
+    (group -> (charts mapped, pieces still to map); after the bulk pass, then after each round),
+    says which groups not to map further: None for those."""
     n = len(bounds) - 1
     sources = [order[bounds[s] : bounds[s + 1]] for s in range(n)]
     sub = _submeshes(F, labels, order, bounds)
     rejected, bijective = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
     final = _bulk_charts(V, F, sub, order, bounds, cfg, size, rejected, bijective, helpers=helpers)
-    skipped = np.zeros(n, dtype=bool) if skip is None else skip(final)
+    mapped = {s: (final[s][0], 0) for s in final}
+    skipped = np.zeros(n, dtype=bool) if skip is None else skip(mapped)
     rest = [s for s in range(n) if s not in final and not skipped[s]]
+    give_up = None
+    if skip is not None:
+
+        def give_up(so_far: dict) -> set:
+            """Of the groups in rounds (group -> (pieces so far in mesh indices, pending)),
+            those to drop, judged with every group the bulk pass mapped."""
+            lost = skip(mapped | so_far)
+            return {s for s in so_far if lost[s]}
+
     results = _solve_in_rounds(
-        V, F, rest, sources, sub, affinity, cfg, seed, size, rejected, bijective, None, 0, helpers
-    )
+        V, F, rest, sources, sub, affinity, cfg, seed, size, rejected, bijective, None, 0, helpers,
+        give_up=give_up,
+    )  # fmt: skip
     out: list[list[Chart] | None] = [final[s][0] if s in final else None for s in range(n)]
     for s in rest:
-        out[s] = _in_mesh(results[s][0], sources[s], sub.of(s)[0], size)
+        if s in results:
+            out[s] = _in_mesh(results[s][0], sources[s], sub.of(s)[0], size)
     return out
 
 
@@ -1152,6 +1165,7 @@ def _solve_in_rounds(
     progress: Callable[[int], None] | None,
     done: int,
     helpers: Helpers | None = None,
+    give_up: Callable[[dict], set] | None = None,
 ) -> dict[int, tuple[list[Chart], bool]]:
     """:func:`_solve_source` for every chart in `rest`, in one process, a split depth at a time.
 
@@ -1162,7 +1176,9 @@ def _solve_in_rounds(
     of set-up (measured on the plate's hole walls and the cortex with a stretch target). A chart
     the bulk pass already rejected (``bulk_rejected``) is bisected at once. Returns what
     :func:`_solve_source` returns, per chart: pieces in chart-local indices and units, sorted as
-    its depth-first bisection would emit them.
+    its depth-first bisection would emit them. ``give_up(so_far)``, after each round that leaves
+    pieces to map (chart -> (its pieces so far, in mesh face indices, and how many are left)),
+    names charts to drop: their pieces are not mapped further and they are not in the result.
     """
     m = len(F)
     pos = np.empty(m, dtype=np.int64)  # each face's index in its chart's face list
@@ -1173,6 +1189,7 @@ def _solve_in_rounds(
     # (chart, faces in chart-local indices, depth, path of bisection choices, bulk tried it)
     pending = [(src, np.arange(len(sources[src])), 0, (), bool(bulk_rejected[src])) for src in rest]
     open_pieces = dict.fromkeys(rest, 1)
+    dropped: set = set()
     while pending:
         nverts = [len(np.unique(sub.of(src)[1][faces])) for src, faces, *_ in pending]
         batch = [
@@ -1232,9 +1249,17 @@ def _solve_in_rounds(
                 if open_pieces[src] == 0:
                     done += 1
                     progress(done)
+        if give_up is not None and nxt:
+            so_far = {
+                src: ([dataclasses.replace(c, faces=sources[src][c.faces]) for _, c in pieces[src]],
+                      open_pieces[src])
+                for src in dict.fromkeys(src for src, *_ in nxt)
+            }  # fmt: skip
+            dropped |= give_up(so_far)
+            nxt = [piece for piece in nxt if piece[0] not in dropped]
         pending = nxt
     return {src: ([c for _, c in sorted(pieces[src], key=lambda t: t[0])], first[src])
-            for src in rest}  # fmt: skip
+            for src in rest if src not in dropped}  # fmt: skip
 
 
 def _solve_source(

@@ -353,6 +353,37 @@ def test_a_tube_too_long_to_open_is_split(monkeypatch, batched):
     assert len(parameterize_charts(V, F, np.zeros(len(F), dtype=np.int64)).charts) == 1
 
 
+@pytest.mark.slow
+def test_the_gain_pass_drops_a_bisection_between_rounds_once_it_fails_anyway(monkeypatch):
+    """After each round a bisection is judged again, with its pieces mapped so far and the ones
+    still to map (each adds excess and a chart): on the quick start's brain the pass drops one
+    that way (its 125-face chart was being halved down to 8-face pieces, one round each), and
+    the atlas is the one mapping every piece gives."""
+    import segparam.split as split
+    from segparam.cli import DEFAULT_MESH_NAME, _data
+    from segparam.io import load_mesh
+    from segparam.pipeline import PipelineConfig, build_atlas
+
+    V, F = load_mesh(_data(DEFAULT_MESH_NAME))
+    cfg = PipelineConfig().replace(remesh={"mode": "off"})
+    dropped = []
+    real = split._hopeless
+
+    def spy(known_so_far, **kw):
+        out = real(known_so_far, **kw)
+        dropped.extend(g for g, (_, pending) in known_so_far.items() if pending and out[g])
+        return out
+
+    monkeypatch.setattr(split, "_hopeless", spy)
+    a = build_atlas(V, F, cfg, seed=0)
+    assert dropped, "no bisection dropped between rounds"
+    monkeypatch.setattr(split, "_hopeless", lambda known, owner, **kw: np.zeros(len(owner), bool))
+    b = build_atlas(V, F, cfg, seed=0)
+    assert a.n_charts == b.n_charts
+    np.testing.assert_array_equal(a.uv_F, b.uv_F)
+    np.testing.assert_array_equal(a.uv, b.uv)
+
+
 def test_the_gain_pass_skips_only_bisections_that_fail_anyway(monkeypatch):
     """A bisection whose halves, as far as the batched pass mapped them, already hold too much
     excess is not mapped to the end (``_hopeless``): the atlas is the one mapping every piece
