@@ -40,8 +40,8 @@ def _parcel(name: str) -> tuple[np.ndarray, np.ndarray]:
     s = 0, i = 33) under numpy 2.4.6 and scipy 1.17.1, and stored: that generator's recursive
     spectral bisection (ARPACK) cuts other parcels under other library versions, and the parcel
     these tests once took from it stopped folding after an upgrade."""
-    data = np.load(Path(__file__).parent / "data" / "parcels.npz")
-    return data[f"{name}_V"], data[f"{name}_F"].astype(np.int64)
+    with np.load(Path(__file__).parent / "data" / "parcels.npz") as data:
+        return data[f"{name}_V"], data[f"{name}_F"].astype(np.int64)
 
 
 def test_plane_is_isometric_up_to_rigid_motion():
