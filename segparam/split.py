@@ -879,6 +879,7 @@ def _bulk_charts(
     bijective: np.ndarray | None = None,
     *,
     helpers: Helpers | None = None,
+    project_only: np.ndarray | None = None,
 ) -> dict[int, tuple[list[Chart], bool]]:
     """The small segmentation charts that map on their first try, mapped all at once.
 
@@ -895,6 +896,9 @@ def _bulk_charts(
       ``max_distortion`` and ``max_stretch``: ``"hessian"``;
     * a tube (:func:`_tubes`) with two loops: cut open into a disk and solved with the others
       (what :func:`_opened` does alone); a tube of more loops is not tried.
+
+    The charts ``project_only`` names (the split rounds' pieces past ``max_depth``) are taken as
+    small ones, whatever their size, as :func:`_try_piece` takes them.
 
     A chart that fails any of these is not in the result: the per-chart path maps or splits it,
     as before. Where :func:`_try_piece` could only fail the same way (a small chart whose
@@ -913,6 +917,8 @@ def _bulk_charts(
     nf = np.diff(bounds)
     nv = np.diff(sub.vptr)
     small = (nf < cfg.min_faces) | (nv < MIN_POINTS)
+    if project_only is not None:
+        small |= project_only
     # Planar: every face normal within PLANAR_TOL of the chart's first face's.
     N = face_normals(V, F[order])  # only the faces of these charts (rounds pass few)
     lab = np.repeat(np.arange(n_src), nf)
@@ -982,6 +988,8 @@ def _bulk_charts(
         emit(proj, vc, uv, q, ok & c_planar[proj], "planar")
         if rejected is not None:
             rejected[cand[proj[~ok & c_small[proj]]]] = True
+    if rejected is not None:  # a small piece of 2+ faces that is not a disk: _try_piece splits it
+        rejected[cand[c_small & (nf[cand] > 1) & ~disk]] = True
     # The solver, on the small non-planar charts (and planar ones whose projection folds).
     # (A chart too small for the neighbourhoods the solver needs comes back starved and is
     # rejected, as the solver alone would raise on it: the brain-2k's 8-12-face pieces of the
@@ -1170,7 +1178,8 @@ def _solve_in_rounds(
     """:func:`_solve_source` for every chart in `rest`, in one process, a split depth at a time.
 
     Each round tries every piece left: the small ones (at most ``BATCH_MAX_VERTICES`` vertices)
-    all at once through :func:`_bulk_charts`, the others one by one (:func:`_try_piece`); the
+    all at once through :func:`_bulk_charts` (those past ``max_depth`` projected only, as
+    :func:`_try_piece` does), the others one by one (:func:`_try_piece`); the
     pieces that fail are bisected, all at once (:func:`segparam.segment.divide_many`), for the
     next round. The pieces a split makes are mostly small, and one solver call each cost ~20 ms
     of set-up (measured on the plate's hole walls and the cortex with a stretch target). A chart
@@ -1194,16 +1203,20 @@ def _solve_in_rounds(
         nverts = [len(np.unique(sub.of(src)[1][faces])) for src, faces, *_ in pending]
         batch = [
             k for k, (_, _, depth, _, tried) in enumerate(pending)
-            if 0 < depth <= cfg.max_depth and not tried and nverts[k] <= BATCH_MAX_VERTICES
+            if depth > 0 and not tried and nverts[k] <= BATCH_MAX_VERTICES
         ]  # fmt: skip
         mapped, rejected = {}, np.zeros(len(batch), dtype=bool)
         if batch:
+            deep = np.array([pending[k][2] > cfg.max_depth for k in batch])  # projected only
             order = np.concatenate([sources[pending[k][0]][pending[k][1]] for k in batch])
             bounds = np.r_[0, np.cumsum([len(pending[k][1]) for k in batch])]
             labels = np.zeros(m, dtype=np.int64)
             labels[order] = np.repeat(np.arange(len(batch)), np.diff(bounds))
             sub_b = _submeshes(F, labels, order, bounds)
-            got = _bulk_charts(V, F, sub_b, order, bounds, cfg, size, rejected, helpers=helpers)
+            got = _bulk_charts(
+                V, F, sub_b, order, bounds, cfg, size, rejected, helpers=helpers,
+                project_only=deep,
+            )  # fmt: skip
             mapped = {batch[i]: got[i][0][0] for i in got}
         rejected_at = {batch[i] for i in np.flatnonzero(rejected)}
         # the pieces the solver takes alone (big ones, and the first try of a segmentation chart)

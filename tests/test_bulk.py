@@ -245,3 +245,30 @@ def test_one_triangle_charts_keep_the_planar_method_conventions():
         P = V[F[c.faces[0]]]
         for i, j in ((0, 1), (1, 2), (0, 2)):
             assert np.linalg.norm(c.uv[i] - c.uv[j]) == pytest.approx(np.linalg.norm(P[i] - P[j]))
+
+
+def test_pieces_past_max_depth_are_projected_in_bulk_as_one_by_one(monkeypatch):
+    # Big Voronoi cells of a torus with a tight angle target and a shallow max_depth: the rounds'
+    # pieces past max_depth are only projected (and split again where a projection fails), as
+    # _try_piece does to each alone, but in one batch per round.
+    rng = np.random.default_rng(2)
+    torus = trimesh.creation.torus(2.0, 0.7, major_sections=24, minor_sections=12)
+    V, F = np.asarray(torus.vertices), np.asarray(torus.faces)
+    labels = np.unique(_random_labels(V, F, rng, 6, scatter=False), return_inverse=True)[1]
+    cfg = SplitConfig(max_depth=2, max_distortion=1.02)
+    alone = []
+    try_piece = split._try_piece
+
+    def counted(V, F, faces, src, depth, *args):
+        alone.append(depth)
+        return try_piece(V, F, faces, src, depth, *args)
+
+    monkeypatch.setattr(split, "_try_piece", counted)
+    cs = parameterize_charts(V, F, labels.ravel(), config=cfg)
+    deep = [c for c in cs.charts if c.depth > cfg.max_depth]
+    assert len(deep) > 20 and {c.method for c in deep} == {"projection"}
+    assert max(len(c.faces) for c in deep) >= cfg.min_faces  # projected whatever their size
+    assert not [d for d in alone if d > cfg.max_depth]  # none of them alone
+    check_charts(V, F, cs)
+    monkeypatch.setattr(split, "_try_piece", try_piece)
+    assert_same_charts(cs, per_chart(V, F, labels.ravel(), config=cfg))
