@@ -262,3 +262,29 @@ def test_hull_boxes_of_many_charts_match_one_chart_at_a_time_and_brute_force() -
     assert fill[-1] == pytest.approx(1.0)
     with pytest.raises(InvalidMeshError, match="chart 1: chart uv points span no area"):
         pack._hull_boxes([sets[0], np.array([[0, 0], [1, 1], [2, 2.0]] * 5)], np.arange(2))
+
+
+def test_hulls_are_qhulls_counter_clockwise_from_the_lowest_leftmost_point() -> None:
+    # the packer's batched monotone chain against scipy's qhull, on random sets, a grid (points
+    # on the hull's edges, which are not vertices) and sets with repeated points
+    from scipy.spatial import ConvexHull
+
+    from segparam import pack
+
+    rng = np.random.default_rng(7)
+    sets = [rng.normal(size=(int(n), 2)) for n in rng.integers(3, 80, 20)]
+    sets.append(np.stack(np.meshgrid(np.arange(4.0), np.arange(3.0)), -1).reshape(-1, 2))
+    sets.append(np.repeat(rng.normal(size=(6, 2)), 3, axis=0))
+    sizes = np.array([len(P) for P in sets])
+    ptr = np.r_[0, np.cumsum(sizes)]
+    S = np.concatenate([P[np.lexsort((P[:, 1], P[:, 0]))] for P in sets])
+    index, count = pack._hulls(S, ptr)
+    for c, P in enumerate(sets):
+        got = S[index[ptr[c] : ptr[c] + count[c]]]
+        want = P[ConvexHull(P).vertices]
+        assert len(got) == len(want)
+        assert {tuple(p) for p in got} == {tuple(p) for p in want}
+        assert tuple(got[0]) == min(tuple(p) for p in P)  # lowest x, then lowest y
+        a, b = np.roll(got, -1, 0) - got, np.roll(got, -2, 0) - np.roll(got, -1, 0)
+        turns = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+        assert (turns > 0).all()  # counter-clockwise, strictly convex
