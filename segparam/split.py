@@ -1179,11 +1179,11 @@ def _solve_in_rounds(
 
     Each round tries every piece left: the small ones (at most ``BATCH_MAX_VERTICES`` vertices)
     all at once through :func:`_bulk_charts` (those past ``max_depth`` projected only, as
-    :func:`_try_piece` does), the others one by one (:func:`_try_piece`); the
-    pieces that fail are bisected, all at once (:func:`segparam.segment.divide_many`), for the
-    next round. The pieces a split makes are mostly small, and one solver call each cost ~20 ms
-    of set-up (measured on the plate's hole walls and the cortex with a stretch target). A chart
-    the bulk pass already rejected (``bulk_rejected``) is bisected at once. Returns what
+    :func:`_try_piece` does), the others one by one (:func:`_try_piece`); the pieces that fail
+    are bisected, all at once (:func:`segparam.segment.divide_many`), for the next round. The
+    pieces a split makes are mostly small, and one solver call each cost ~20 ms of set-up
+    (measured on the plate's hole walls and the cortex with a stretch target). A chart the bulk
+    pass already rejected (``bulk_rejected``) is bisected at once. Returns what
     :func:`_solve_source` returns, per chart: pieces in chart-local indices and units, sorted as
     its depth-first bisection would emit them. ``give_up(so_far)``, after each round that leaves
     pieces to map (chart -> (its pieces so far, in mesh face indices, and how many are left)),
