@@ -536,13 +536,12 @@ def _hull_boxes(
     order = np.lexsort((centred[:, 1], centred[:, 0], which))  # per set, by x then y
     S = centred[order]
     index, count = _hulls(S, ptr)
-    H = S[index]  # every hull, counter-clockwise
+    H = S[index]  # every hull, counter-clockwise, padded to its set's size
     start = ptr[:-1]
-    slot = np.arange(int(count.max()))
-    valid = slot[None, :] < count[:, None]
-    P = H[start[:, None] + np.where(valid, slot[None, :], 0)]  # (c, hmax, 2), padded
-    d = H[start[:, None] + (slot[None, :] + 1) % count[:, None]] - P  # edge k: vertex k -> k+1
-    area = 0.5 * np.where(valid, P[..., 0] * d[..., 1] - P[..., 1] * d[..., 0], 0).sum(axis=1)
+    x, y = H[:, 0], H[:, 1]
+    slot = np.arange(len(H)) - start[which]
+    nxt = np.where(slot + 1 < count[which], np.arange(len(H)) + 1, start[which])
+    area = 0.5 * np.add.reduceat(np.where(slot < count[which], x * y[nxt] - x[nxt] * y, 0), start)
     bad = (count < 3) | ~(area > 0)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
@@ -550,6 +549,11 @@ def _hull_boxes(
         raise InvalidMeshError(
             f"{where}chart uv points span no area ({sizes[k]} points are collinear or coincide)"
         )
+    hmax = int(count.max())
+    slot = np.arange(hmax)
+    valid = slot[None, :] < count[:, None]
+    P = H[start[:, None] + np.where(valid, slot[None, :], 0)]  # (c, hmax, 2), padded
+    d = H[start[:, None] + (slot[None, :] + 1) % count[:, None]] - P  # edge k: vertex k -> k+1
     theta = np.arctan2(d[..., 1], d[..., 0])
     angle, box = _boxes_along(P, theta, valid)
     return angle, area / box
