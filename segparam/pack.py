@@ -541,6 +541,9 @@ def _hull_boxes(
     x, y = H[:, 0], H[:, 1]
     slot = np.arange(len(H)) - start[which]
     nxt = np.where(slot + 1 < count[which], np.arange(len(H)) + 1, start[which])
+    # each hull's own terms, summed in order: a padded row's sum (pairwise over the widest
+    # hull) would differ in the last bit from the hull's alone, and the boxes must not depend
+    # on the batch
     area = 0.5 * np.add.reduceat(np.where(slot < count[which], x * y[nxt] - x[nxt] * y, 0), start)
     bad = (count < 3) | ~(area > 0)
     if bad.any():
