@@ -15,7 +15,8 @@ search, so that an over-full trial still reports how much height it needed):
     One more than the highest forbidden texel of column j below the top border (the canvas
     height in the side borders): everything above it is free.
 ``sky_min``
-    The skyline's minimum per block of `_SKY_BLOCK` columns (the resting search skips blocks).
+    The skyline's minimum over the `_SKY_BLOCK` columns from each column on (the resting
+    search skips a run of positions at once with it).
 ``coarse``, ``prefix``, ``max_free``, ``free_bits``
     ``forbid`` pooled into blocks of ``block x block`` texels ("any"), its row-wise prefix
     sums (so that a run of cells is tested in O(1)), each coarse row's longest free run, and its
@@ -72,12 +73,13 @@ def _trailing_zeros(typingctx, word):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def _sky_minima(sky, sky_min, c0, c1):  # pragma: no cover - compiled
-    """Refresh the minima of the skyline blocks that hold columns c0 .. c1 - 1."""
-    for k in range(max(c0, 0) // _SKY_BLOCK, min((c1 - 1) // _SKY_BLOCK + 1, len(sky_min))):
-        m = sky[k * _SKY_BLOCK]
-        for j in range(k * _SKY_BLOCK, min((k + 1) * _SKY_BLOCK, len(sky))):
+    """Refresh ``sky_min[x] = min(sky[x : x + _SKY_BLOCK])`` where columns c0 .. c1 - 1 changed."""
+    width = len(sky)
+    for x in range(max(c0 - _SKY_BLOCK + 1, 0), min(c1, width)):
+        m = sky[x]
+        for j in range(x + 1, min(x + _SKY_BLOCK, width)):
             m = min(m, sky[j])
-        sky_min[k] = m
+        sky_min[x] = m
 
 
 @njit(cache=True, nogil=True)
@@ -401,8 +403,9 @@ def resting(bottom, cols, sky, sky_min, top, count, samples):  # pragma: no cove
     scanned left to right; a position is dropped as soon as one of its terms already exceeds
     the `count`-th best row kept, testing about `samples` spread columns (the footprint's lowest
     one first) before the rest, so most positions cost a few comparisons; a run of
-    `_SKY_BLOCK` positions is dropped at once when the skyline's minimum (`sky_min`, per block
-    of `_SKY_BLOCK` columns) under the footprint's lowest column is already too high. The
+    `_SKY_BLOCK` positions is dropped at once when, for the lowest column or for one of the
+    spread ones, the skyline's minimum under it across the run (`sky_min`: the minimum over
+    `_SKY_BLOCK` columns from each column on) already lifts every position too high. The
     result is the exact `count` best. `bottom` holds the footprint's lowest row per column
     (`_EMPTY` for an empty column). Returns (found, rows, cols).
     """
@@ -430,10 +433,15 @@ def resting(bottom, cols, sky, sky_min, top, count, samples):  # pragma: no cove
         j += 1
         # a kept position must come lower than the worst kept (equal rows: left-most wins)
         limit = top if found < count else out_r[count - 1] - 1
-        if j % _SKY_BLOCK == 0:  # positions j .. j + B - 1 see columns of blocks k and k + 1
-            k = (j + lowest_col) // _SKY_BLOCK
-            low = sky_min[k] if k + 1 == len(sky_min) else min(sky_min[k], sky_min[k + 1])
-            if low - bottom[lowest_col] > limit:
+        if j % _SKY_BLOCK == 0:
+            # every position j .. j + B - 1 rests at least this high: a column's lowest texel
+            # over the lowest skyline it meets across them
+            low = sky_min[j + lowest_col] - bottom[lowest_col]
+            t = 1
+            while low <= limit and t < n_probe:
+                low = max(low, sky_min[j + probe[t]] - bottom[probe[t]])
+                t += 1
+            if low > limit:
                 j += _SKY_BLOCK - 1
                 continue
         # the column that lifted the last position too high is, one column over, the likeliest
@@ -636,7 +644,7 @@ def trial(
     forbid, sky, coarse = empty[0].copy(), empty[1].copy(), empty[2].copy()
     prefix, max_free, free_bits = empty[3].copy(), empty[4].copy(), empty[5].copy()
     height, width = forbid.shape
-    sky_min = np.empty((width + _SKY_BLOCK - 1) // _SKY_BLOCK, dtype=np.int64)
+    sky_min = np.empty(width, dtype=np.int64)
     _sky_minima(sky, sky_min, np.int64(0), width)  # not a literal 0: see new_canvas
     result = np.full((len(entry_ptr) - 1, 6), -1, dtype=np.int64)
     need = 0

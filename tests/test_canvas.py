@@ -16,7 +16,7 @@ def _canvas_with_blobs(width: int, height: int, pad: int, seed: int, rule: str):
     """A canvas (block 1) with six random blobs placed by one rule's search, and its state."""
     rng = np.random.default_rng(seed)
     forbid, sky, coarse, prefix, max_free, bits = canvas.new_canvas(width, height, pad, 1)
-    sky_min = np.empty(-(-width // canvas._SKY_BLOCK), dtype=np.int64)
+    sky_min = np.empty(width, dtype=np.int64)
     canvas._sky_minima(sky, sky_min, 0, width)
     for _ in range(6):
         blob = rng.random((int(rng.integers(3, 12)), int(rng.integers(3, 12)))) < 0.7
@@ -164,7 +164,7 @@ def test_resting_search_pruning_gives_the_full_searchs_answer(seed: int) -> None
     width, height, pad = 300, 340, 2
     sky = np.full(width, height, dtype=np.int64)
     sky[2:-2] = np.cumsum(rng.integers(-6, 7, 296)).clip(-40, 200) + 60
-    sky_min = np.empty(-(-width // canvas._SKY_BLOCK), dtype=np.int64)
+    sky_min = np.empty(width, dtype=np.int64)
     canvas._sky_minima(sky, sky_min, 0, width)
     for _ in range(5):
         mask = np.tri(int(rng.integers(5, 60)), int(rng.integers(20, 200)), 0, dtype=bool)
