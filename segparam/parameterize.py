@@ -600,30 +600,68 @@ def unfolded_normals(
     turn = np.flatnonzero(least < min_cos)
     if len(turn) == 0:
         return normal
+    # each vertex to turn and its adjacent faces, in face order
     local = np.full(n, -1, dtype=np.int64)
     local[turn] = np.arange(len(turn))
     keep = local[iv] >= 0
-    iv, jf = local[iv[keep]], jf[keep]  # incidences of the vertices to turn, renumbered
-    start = normal[turn]
-    m, best, best_cos = start.copy(), start.copy(), least[turn].copy()
-    for k in range(MAXMIN_STEPS):  # subgradient ascent on the least cosine, all vertices at once
-        cos, worst = _least_cos(m, fn, iv, jf, len(turn))
-        better = cos > best_cos
-        best[better], best_cos[better] = m[better], cos[better]
-        m = m + (0.5 / np.sqrt(k + 1)) * fn[worst]
-        m /= np.linalg.norm(m, axis=1, keepdims=True)
-    out = best.copy()
-    done = np.zeros(len(turn), dtype=bool)
-    for s in np.arange(1, MAXMIN_CANDIDATES + 1) / MAXMIN_CANDIDATES:
-        c = (1 - s) * start + s * best
-        c /= np.maximum(np.linalg.norm(c, axis=1, keepdims=True), 1e-300)
-        cos, _ = _least_cos(c, fn, iv, jf, len(turn))
-        take = ~done & (cos >= min_cos)
-        out[take] = c[take]
-        done |= take
+    iv, jf = local[iv[keep]], jf[keep]
+    by = np.argsort(iv, kind="stable")
+    ptr = np.r_[0, np.cumsum(np.bincount(iv, minlength=len(turn)))]
     normal = normal.copy()
-    normal[turn] = out
+    normal[turn] = _turned_normals(
+        np.ascontiguousarray(normal[turn]), np.ascontiguousarray(fn), ptr, jf[by], least[turn],
+        min_cos, MAXMIN_STEPS, MAXMIN_CANDIDATES,
+    )  # fmt: skip
     return normal
+
+
+@njit(cache=True, nogil=True)
+def _face_least_cos(m0, m1, m2, fn, faces):  # pragma: no cover - compiled
+    """The least ``m . fn[f]`` over `faces` and the last face (in their order) attaining it."""
+    least = np.inf
+    worst = 0
+    for f in faces:
+        c = m0 * fn[f, 0] + m1 * fn[f, 1] + m2 * fn[f, 2]
+        if c <= least:
+            least = c
+            worst = f
+    return least, worst
+
+
+@njit(cache=True, nogil=True)
+def _turned_normals(start, fn, ptr, faces, least, min_cos, steps, candidates):  # pragma: no cover
+    """:func:`unfolded_normals`' search for each vertex to turn, one after the other: vertex t
+    starts at ``start[t]`` (least cosine ``least[t]``) with adjacent faces ``faces[ptr[t] :
+    ptr[t + 1]]``. The arithmetic of the batched numpy form, term by term."""
+    out = np.empty_like(start)
+    for t in range(len(start)):
+        own = faces[ptr[t] : ptr[t + 1]]
+        s0, s1, s2 = start[t, 0], start[t, 1], start[t, 2]
+        m0, m1, m2 = s0, s1, s2
+        b0, b1, b2 = s0, s1, s2
+        best_cos = least[t]
+        for k in range(steps):  # subgradient ascent on the least cosine
+            cos, worst = _face_least_cos(m0, m1, m2, fn, own)
+            if cos > best_cos:
+                b0, b1, b2, best_cos = m0, m1, m2, cos
+            step = 0.5 / np.sqrt(k + 1)
+            m0 = m0 + step * fn[worst, 0]
+            m1 = m1 + step * fn[worst, 1]
+            m2 = m2 + step * fn[worst, 2]
+            norm = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+            m0, m1, m2 = m0 / norm, m1 / norm, m2 / norm
+        out[t, 0], out[t, 1], out[t, 2] = b0, b1, b2
+        for i in range(1, candidates + 1):  # the least turn towards it that unfolds the ring
+            s = i / candidates
+            c0 = (1 - s) * s0 + s * b0
+            c1 = (1 - s) * s1 + s * b1
+            c2 = (1 - s) * s2 + s * b2
+            norm = max(np.sqrt(c0 * c0 + c1 * c1 + c2 * c2), 1e-300)
+            c0, c1, c2 = c0 / norm, c1 / norm, c2 / norm
+            if _face_least_cos(c0, c1, c2, fn, own)[0] >= min_cos:
+                out[t, 0], out[t, 1], out[t, 2] = c0, c1, c2
+                break
+    return out
 
 
 # ---------------------------------------------------------------------------------------------

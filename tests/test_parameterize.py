@@ -684,6 +684,69 @@ def test_unfolded_normals_turn_only_planes_that_fold_an_adjacent_triangle():
     assert unfolded_normals(V, F, out) is out  # nothing left to turn
 
 
+def _unfolded_normals_batched(V, F, normal, min_cos):
+    """unfolded_normals as batched numpy (its form before the search was compiled): every vertex
+    to turn at once, 40 subgradient steps, 10 candidate planes."""
+    from segparam.mesh import face_normals
+
+    fn = face_normals(V, F)
+    n = len(V)
+
+    def least_cos(nrm, iv, jf, count):
+        cos = np.einsum("ij,ij->i", nrm[iv], fn[jf])
+        least = np.full(count, np.inf)
+        np.minimum.at(least, iv, cos)
+        worst = np.zeros(count, dtype=np.int64)
+        hit = cos <= least[iv]
+        worst[iv[hit]] = jf[hit]
+        return least, worst
+
+    iv, jf = F.ravel(), np.repeat(np.arange(len(F)), 3)
+    least, _ = least_cos(normal, iv, jf, n)
+    turn = np.flatnonzero(least < min_cos)
+    local = np.full(n, -1)
+    local[turn] = np.arange(len(turn))
+    keep = local[iv] >= 0
+    iv, jf = local[iv[keep]], jf[keep]
+    start = normal[turn]
+    m, best, best_cos = start.copy(), start.copy(), least[turn].copy()
+    for k in range(40):
+        cos, worst = least_cos(m, iv, jf, len(turn))
+        better = cos > best_cos
+        best[better], best_cos[better] = m[better], cos[better]
+        m = m + (0.5 / np.sqrt(k + 1)) * fn[worst]
+        m /= np.linalg.norm(m, axis=1, keepdims=True)
+    out, done = best.copy(), np.zeros(len(turn), dtype=bool)
+    for s in np.arange(1, 11) / 10:
+        c = (1 - s) * start + s * best
+        c /= np.maximum(np.linalg.norm(c, axis=1, keepdims=True), 1e-300)
+        take = ~done & (least_cos(c, iv, jf, len(turn))[0] >= min_cos)
+        out[take], done = c[take], done | take
+    normal = normal.copy()
+    normal[turn] = out
+    return normal, len(turn)
+
+
+def test_unfolded_normals_are_the_batched_search_bit_for_bit():
+    # the max-min search runs vertex by vertex, compiled: the same numbers as the batched form
+    from segparam.parameterize import (
+        FOLD_MIN_COS,
+        MAXMIN_CANDIDATES,
+        MAXMIN_STEPS,
+        unfolded_normals,
+    )
+
+    assert (MAXMIN_STEPS, MAXMIN_CANDIDATES) == (40, 10)
+    rng = np.random.default_rng(3)
+    V, F = tri_grid(12, 12)
+    V = np.column_stack([V[:, :2], 0.3 * rng.standard_normal(len(V))])  # a crumpled sheet
+    normal = rng.standard_normal((len(V), 3)) + [0.0, 0.0, 2.0]
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    want, n_turned = _unfolded_normals_batched(V, F, normal, FOLD_MIN_COS)
+    assert n_turned > 20
+    np.testing.assert_array_equal(unfolded_normals(V, F, normal), want)
+
+
 def test_the_eigenvector_selection_on_a_large_chart_is_the_dense_one(monkeypatch):
     # Above DENSE_LIMIT the fourth eigenvector comes from the sparse solver, started from the
     # three already found: forced on a 1,600-vertex strip (every chart switches whose third
