@@ -440,39 +440,80 @@ def ill_conditioned(
     The conditioning is ``sigma_min / sigma_max`` of the normalized design
     ``P = [u^2, uv, v^2, u, v, 1]``, i.e. ``sqrt(lambda_min / lambda_max)`` of ``G = P^T P``. Most
     neighbourhoods are far from the threshold (interior vertices of a regular mesh score
-    0.13-0.18 against 0.03), so they are cleared by one batched Cholesky test: with
-    ``r = min_rcond``, if ``G - r^2 trace(G) I`` is positive definite then
-    ``lambda_min > r^2 trace(G) >= r^2 lambda_max``. Only the rest (mostly boundary vertices) get
-    an eigenvalue decomposition; the answer is that of computing every ``lambda_min / lambda_max``,
-    at 60% of its cost.
+    0.13-0.18 against 0.03), so they are cleared by a Cholesky test: with ``r = min_rcond``, if
+    ``G - r^2 trace(G) I`` is positive definite then ``lambda_min > r^2 trace(G) >= r^2
+    lambda_max``. Only the rest (mostly boundary vertices) get an eigenvalue decomposition; the
+    answer is that of computing every ``lambda_min / lambda_max``, at 60% of its cost.
 
     Returns
     -------
     (n,) bool ndarray
         True for the ill-conditioned vertices of `subset` (all vertices by default).
     """
+    rows = np.arange(len(V)) if subset is None else np.asarray(subset, dtype=np.int64)
     out = np.zeros(len(V), dtype=bool)
-    for rows, N in _groups(ptr, idx, subset):
-        u, v, _ = _design(V, N, b1[rows], b2[rows])
-        P = np.stack([u * u, u * v, v * v, u, v, np.ones_like(u)], axis=2)
-        G = P.transpose(0, 2, 1) @ P
-        tau = min_rcond**2 * np.trace(G, axis1=1, axis2=2)
-        unsure = np.flatnonzero(~_positive_definite(G - tau[:, None, None] * np.eye(6)))
-        lam = np.linalg.eigvalsh(G[unsure])
-        out[rows[unsure]] = lam[:, 0] < min_rcond**2 * lam[:, -1]
+    _ill_conditioned_rows(V, ptr, idx, b1, b2, float(min_rcond), rows, out)
     return out
 
 
-def _positive_definite(G: np.ndarray) -> np.ndarray:
-    """Which of the symmetric ``(g, k, k)`` matrices have a Cholesky factorization (batched)."""
-    G = G.copy()
-    ok = np.ones(len(G), dtype=bool)
-    for j in range(G.shape[1]):
-        pivot = G[:, j, j]
-        ok &= pivot > 0
-        col = G[:, j + 1 :, j] / np.sqrt(np.where(pivot > 0, pivot, 1.0))[:, None]
-        G[:, j + 1 :, j + 1 :] -= col[:, :, None] * col[:, None, :]
-    return ok
+@njit(cache=True, nogil=True)
+def _ill_conditioned_rows(V, ptr, idx, b1, b2, min_rcond, rows, out):  # pragma: no cover
+    """:func:`ill_conditioned` of the vertices `rows`, one after the other, into `out` (compiled:
+    the batched numpy form cost 1 ms a call in groups of neighbourhood sizes, most of brain-2k's
+    49 calls being small)."""
+    r2 = min_rcond * min_rcond
+    most = 1
+    for i in rows:
+        most = max(most, ptr[i + 1] - ptr[i])
+    u = np.empty(most)
+    v = np.empty(most)
+    G = np.empty((6, 6))
+    H = np.empty((6, 6))
+    p = np.empty(6)
+    for i in rows:
+        start, k = ptr[i], ptr[i + 1] - ptr[i]
+        c = idx[start]
+        # the normalized design (as _design): tangent coordinates over their RMS radius
+        squares = 0.0
+        for a in range(k):
+            w = idx[start + a]
+            d0, d1, d2 = V[w, 0] - V[c, 0], V[w, 1] - V[c, 1], V[w, 2] - V[c, 2]
+            u[a] = d0 * b1[i, 0] + d1 * b1[i, 1] + d2 * b1[i, 2]
+            v[a] = d0 * b2[i, 0] + d1 * b2[i, 1] + d2 * b2[i, 2]
+            squares += u[a] * u[a] + v[a] * v[a]
+        scale = np.sqrt(squares / (k - 1))
+        G[:] = 0.0
+        for a in range(k):
+            x, y = u[a] / scale, v[a] / scale
+            p[0], p[1], p[2], p[3], p[4], p[5] = x * x, x * y, y * y, x, y, 1.0
+            for r in range(6):
+                for q in range(r, 6):
+                    G[r, q] += p[r] * p[q]
+        trace = 0.0
+        for r in range(6):
+            trace += G[r, r]
+            for q in range(r):
+                G[r, q] = G[q, r]
+        # the Cholesky test of G - r^2 trace(G) I (see ill_conditioned)
+        for r in range(6):
+            for q in range(6):
+                H[r, q] = G[r, q]
+            H[r, r] -= r2 * trace
+        definite = True
+        for j in range(6):
+            if not H[j, j] > 0:
+                definite = False
+                break
+            root = np.sqrt(H[j, j])
+            for a in range(j + 1, 6):
+                H[a, j] /= root
+            for a in range(j + 1, 6):
+                for b in range(j + 1, 6):
+                    H[a, b] -= H[a, j] * H[b, j]
+        if definite:
+            continue
+        lam = np.linalg.eigvalsh(G)
+        out[i] = lam[0] < r2 * lam[5]
 
 
 def _pca_normals(V: np.ndarray, ptr: np.ndarray, idx: np.ndarray) -> np.ndarray:
