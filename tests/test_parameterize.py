@@ -606,6 +606,24 @@ def test_explained_by_first_is_the_r2_of_a_function_of_the_first():
     assert np.all((r2 >= 0) & (r2 <= 1 + 1e-12))
 
 
+def test_explained_by_first_of_a_stack_is_each_charts_own():
+    # charts of one size are measured together: each gets what it gets alone
+    from segparam.parameterize import explained_by_first
+
+    rng = np.random.default_rng(2)
+    x = rng.uniform(-1, 1, (3, 40))
+    vectors = np.stack(
+        [
+            np.column_stack([np.ones(40), x[b], x[b] ** 2 + b * rng.uniform(-1, 1, 40)])
+            for b in range(3)
+        ]
+    )
+    together = explained_by_first(vectors)
+    alone = np.concatenate([explained_by_first(vectors[b : b + 1]) for b in range(3)])
+    np.testing.assert_array_equal(together, alone)
+    assert together[0, 0] == pytest.approx(1.0) and together[2, 0] < 0.7
+
+
 def test_a_first_coordinate_of_two_values_explains_nothing_it_is_not():
     """Across a one-row strip the first coordinate takes two values (x^2 = 1): its higher powers
     add nothing, and the rounding noise left of them must not explain the second coordinate."""
