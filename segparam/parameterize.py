@@ -451,26 +451,33 @@ def ill_conditioned(
         True for the ill-conditioned vertices of `subset` (all vertices by default).
     """
     rows = np.arange(len(V)) if subset is None else np.asarray(subset, dtype=np.int64)
+    G = np.empty((len(rows), 6, 6))
+    unsure = _cholesky_screen(V, ptr, idx, b1, b2, float(min_rcond), rows, G)
+    lam = np.linalg.eigvalsh(G[unsure])
     out = np.zeros(len(V), dtype=bool)
-    _ill_conditioned_rows(V, ptr, idx, b1, b2, float(min_rcond), rows, out)
+    out[rows[unsure]] = lam[:, 0] < min_rcond**2 * lam[:, -1]
     return out
 
 
 @njit(cache=True, nogil=True)
-def _ill_conditioned_rows(V, ptr, idx, b1, b2, min_rcond, rows, out):  # pragma: no cover
-    """:func:`ill_conditioned` of the vertices `rows`, one after the other, into `out` (compiled:
+def _cholesky_screen(V, ptr, idx, b1, b2, min_rcond, rows, Gs):  # pragma: no cover - compiled
+    """:func:`ill_conditioned`'s Gram matrices ``G`` of the vertices `rows` (into `Gs`) and its
+    Cholesky test, vertex after vertex: the positions in `rows` the test leaves unsure. Compiled:
     the batched numpy form cost 1 ms a call in groups of neighbourhood sizes, most of brain-2k's
-    49 calls being small)."""
+    49 calls being small; the eigenvalues of the unsure stay with numpy (numba's LAPACK
+    bindings took 1.5 s to compile on the first run)."""
     r2 = min_rcond * min_rcond
     most = 1
     for i in rows:
         most = max(most, ptr[i + 1] - ptr[i])
     u = np.empty(most)
     v = np.empty(most)
-    G = np.empty((6, 6))
+    unsure = np.zeros(len(rows), dtype=np.bool_)
     H = np.empty((6, 6))
     p = np.empty(6)
-    for i in rows:
+    for t in range(len(rows)):
+        i = rows[t]
+        G = Gs[t]
         start, k = ptr[i], ptr[i + 1] - ptr[i]
         c = idx[start]
         # the normalized design (as _design): tangent coordinates over their RMS radius
@@ -510,10 +517,8 @@ def _ill_conditioned_rows(V, ptr, idx, b1, b2, min_rcond, rows, out):  # pragma:
             for a in range(j + 1, 6):
                 for b in range(j + 1, 6):
                     H[a, b] -= H[a, j] * H[b, j]
-        if definite:
-            continue
-        lam = np.linalg.eigvalsh(G)
-        out[i] = lam[0] < r2 * lam[5]
+        unsure[t] = not definite
+    return unsure
 
 
 def _pca_normals(V: np.ndarray, ptr: np.ndarray, idx: np.ndarray) -> np.ndarray:
@@ -929,32 +934,66 @@ def explained_by_first(vectors: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
+def _dot(a, b):  # pragma: no cover - compiled
+    """``a . b`` of two vectors, in order."""
+    total = 0.0
+    for i in range(len(a)):
+        total += a[i] * b[i]
+    return total
+
+
+@njit(cache=True, nogil=True)
+def _take_out(w, q):  # pragma: no cover - compiled
+    """``w -= (q . w) q`` (q a unit vector)."""
+    c = _dot(q, w)
+    for i in range(len(w)):
+        w[i] -= c * q[i]
+
+
+@njit(cache=True, nogil=True)
 def _explained(vectors, degree, rank_tol):  # pragma: no cover - compiled
     """:func:`explained_by_first`, chart after chart (compiled: batched numpy cost 0.16 ms a
-    call, mostly on one chart at a time)."""
+    call, mostly on one chart at a time). The powers of h1 are orthonormalized by Gram-Schmidt,
+    twice over, in plain loops (numba's LAPACK bindings and array expressions took 5-9 s to
+    compile on the first run): a power whose residual is below `rank_tol` of its norm stays in
+    the basis, as in a QR factorization, but explains nothing."""
     g, s, k = vectors.shape
     out = np.empty((g, k - 2))
-    A = np.empty((s, degree + 1))
+    Q = np.empty((degree + 1, s))
+    X = np.empty((k, s))
+    w = np.empty(s)
     for b in range(g):
-        X = vectors[b] - vectors[b].sum(axis=0) / s
-        h1 = X[:, 1]
-        x = h1 / max(np.sqrt((h1 * h1).sum() / s), 1e-300)
-        for p in range(degree + 1):
+        for j in range(k):  # centred, one row per eigenvector
+            mean = 0.0
             for i in range(s):
-                A[i, p] = x[i] ** float(p)
-        Q, R = np.linalg.qr(A)
-        # A power of h1 that the lower ones already give (h1 takes only a few values, as across
-        # a one-row strip where x^2 = 1) leaves a residual of rounding noise, which QR would
-        # blow up into a column that "explains" anything: such columns are dropped.
+                mean += vectors[b, i, j]
+            mean /= s
+            for i in range(s):
+                X[j, i] = vectors[b, i, j] - mean
+        rms = max(np.sqrt(_dot(X[1], X[1]) / s), 1e-300)
+        n_basis = 0
+        kept = np.zeros(degree + 1, dtype=np.bool_)
         for p in range(min(s, degree + 1)):
-            if not abs(R[p, p]) > rank_tol * np.sqrt((A[:, p] * A[:, p]).sum()):
-                Q[:, p] = 0.0
-        H = np.ascontiguousarray(X[:, 2:])
-        Q = np.ascontiguousarray(Q)
-        residual = H - Q @ (np.ascontiguousarray(Q.T) @ H)
-        for j in range(k - 2):
-            total = max((H[:, j] * H[:, j]).sum(), 1e-300)
-            out[b, j] = 1 - (residual[:, j] * residual[:, j]).sum() / total
+            for i in range(s):
+                w[i] = (X[1, i] / rms) ** float(p)
+            norm = np.sqrt(_dot(w, w))
+            for _ in range(2):
+                for q in range(n_basis):
+                    _take_out(w, Q[q])
+            r = np.sqrt(_dot(w, w))
+            if r > 0:
+                for i in range(s):
+                    Q[n_basis, i] = w[i] / r
+                kept[n_basis] = r > rank_tol * norm
+                n_basis += 1
+        for j in range(2, k):
+            total = max(_dot(X[j], X[j]), 1e-300)
+            for i in range(s):
+                w[i] = X[j, i]
+            for q in range(n_basis):
+                if kept[q]:
+                    _take_out(w, Q[q])
+            out[b, j - 2] = 1 - _dot(w, w) / total
     return out
 
 
