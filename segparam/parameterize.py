@@ -54,6 +54,7 @@ from .mesh import (
     edges,
     face_areas,
     face_normals,
+    group_by_label,
     is_edge_manifold,
     is_vertex_manifold,
     label_topology,
@@ -587,18 +588,6 @@ def tangent_frames(
     return plane_basis(normal)
 
 
-def _least_cos(normal: np.ndarray, fn: np.ndarray, iv: np.ndarray, jf: np.ndarray, n: int):
-    """Per vertex, the least ``normal[v] . fn[f]`` over the incidences ``(iv, jf)`` (vertex,
-    adjacent face), and a face that attains it."""
-    cos = np.einsum("ij,ij->i", normal[iv], fn[jf])
-    least = np.full(n, np.inf)
-    np.minimum.at(least, iv, cos)
-    worst = np.zeros(n, dtype=np.int64)
-    hit = cos <= least[iv]
-    worst[iv[hit]] = jf[hit]  # any face attaining the minimum
-    return least, worst
-
-
 def unfolded_normals(
     V: np.ndarray,
     F: np.ndarray,
@@ -621,7 +610,7 @@ def unfolded_normals(
     triangle's normal, step ``0.5 / sqrt(k)``, best iterate kept), and the new normal is the first
     of ``normalize((1 - s) n_i + s m_i)``, ``s = 1 / MAXMIN_CANDIDATES, ..., 1``, whose least
     cosine reaches `min_cos` (``m_i`` itself if none does): the least turn that unfolds the 1-ring.
-    Vertices above `min_cos` keep their plane. Batched over the vertices to turn.
+    Vertices above `min_cos` keep their plane. Compiled, vertex after vertex.
 
     Parameters
     ----------
@@ -639,24 +628,21 @@ def unfolded_normals(
         Unit normals; rows of the vertices not turned are `normal`'s.
     """
     n = len(V)
-    fn = face_normals(V, F) if face_normal is None else face_normal
-    iv = F.ravel()
-    jf = np.repeat(np.arange(len(F)), 3)
-    least, _ = _least_cos(normal, fn, iv, jf, n)
+    fn = np.ascontiguousarray(face_normals(V, F) if face_normal is None else face_normal)
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    least = _least_cosines(np.ascontiguousarray(normal, dtype=np.float64), fn, F, n)
     turn = np.flatnonzero(least < min_cos)
     if len(turn) == 0:
         return normal
     # each vertex to turn and its adjacent faces, in face order
     local = np.full(n, -1, dtype=np.int64)
     local[turn] = np.arange(len(turn))
-    keep = local[iv] >= 0
-    iv, jf = local[iv[keep]], jf[keep]
-    by = np.argsort(iv, kind="stable")
-    ptr = np.r_[0, np.cumsum(np.bincount(iv, minlength=len(turn)))]
+    corner = np.flatnonzero(local[F.ravel()] >= 0)
+    order, bounds = group_by_label(local[F.ravel()[corner]], len(turn))
     normal = normal.copy()
     normal[turn] = _turned_normals(
-        np.ascontiguousarray(normal[turn]), np.ascontiguousarray(fn), ptr, jf[by], least[turn],
-        min_cos, MAXMIN_STEPS, MAXMIN_CANDIDATES,
+        np.ascontiguousarray(normal[turn]), fn, bounds, corner[order] // 3, least[turn], min_cos,
+        MAXMIN_STEPS, MAXMIN_CANDIDATES,
     )  # fmt: skip
     return normal
 
@@ -675,13 +661,28 @@ def _face_least_cos(m0, m1, m2, fn, faces):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _turned_normals(start, fn, ptr, faces, least, min_cos, steps, candidates):  # pragma: no cover
+def _least_cosines(normal, fn, F, n):  # pragma: no cover - compiled
+    """Per vertex v of the n, the least ``normal[v] . fn[f]`` over its faces f (inf for a vertex
+    without faces)."""
+    out = np.full(n, np.inf)
+    for f in range(len(F)):
+        for corner in range(3):
+            v = F[f, corner]
+            c = normal[v, 0] * fn[f, 0] + normal[v, 1] * fn[f, 1] + normal[v, 2] * fn[f, 2]
+            out[v] = min(out[v], c)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _turned_normals(
+    start, fn, bounds, faces, least, min_cos, steps, candidates
+):  # pragma: no cover - compiled
     """:func:`unfolded_normals`' search for each vertex to turn, one after the other: vertex t
-    starts at ``start[t]`` (least cosine ``least[t]``) with adjacent faces ``faces[ptr[t] :
-    ptr[t + 1]]``. The arithmetic of the batched numpy form, term by term."""
+    starts at ``start[t]`` (least cosine ``least[t]``) with adjacent faces ``faces[bounds[t] :
+    bounds[t + 1]]``. The arithmetic of the batched numpy form, term by term."""
     out = np.empty_like(start)
     for t in range(len(start)):
-        own = faces[ptr[t] : ptr[t + 1]]
+        own = faces[bounds[t] : bounds[t + 1]]
         s0, s1, s2 = start[t, 0], start[t, 1], start[t, 2]
         m0, m1, m2 = s0, s1, s2
         b0, b1, b2 = s0, s1, s2
