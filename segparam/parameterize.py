@@ -452,9 +452,9 @@ def ill_conditioned(
         True for the ill-conditioned vertices of `subset` (all vertices by default).
     """
     rows = np.arange(len(V)) if subset is None else np.asarray(subset, dtype=np.int64)
-    G = np.empty((len(rows), 6, 6))
+    G = np.empty((len(rows), 6, 6))  # only the unsure ones' are written (pages untouched)
     unsure = _cholesky_screen(V, ptr, idx, b1, b2, float(min_rcond), rows, G)
-    lam = np.linalg.eigvalsh(G[unsure])
+    lam = np.linalg.eigvalsh(G[: len(unsure)])
     out = np.zeros(len(V), dtype=bool)
     out[rows[unsure]] = lam[:, 0] < min_rcond**2 * lam[:, -1]
     return out
@@ -462,8 +462,8 @@ def ill_conditioned(
 
 @njit(cache=True, nogil=True)
 def _cholesky_screen(V, ptr, idx, b1, b2, min_rcond, rows, Gs):  # pragma: no cover - compiled
-    """:func:`ill_conditioned`'s Gram matrices ``G`` of the vertices `rows` (into `Gs`) and its
-    Cholesky test, vertex after vertex: the positions in `rows` the test leaves unsure. Compiled:
+    """:func:`ill_conditioned`'s Cholesky test of the vertices `rows`, vertex after vertex: the
+    positions in `rows` it leaves unsure, their Gram matrices ``G`` in `Gs`, in order. Compiled:
     the batched numpy form cost 1 ms a call in groups of neighbourhood sizes, most of brain-2k's
     49 calls being small; the eigenvalues of the unsure stay with numpy (numba's LAPACK
     bindings took 1.5 s to compile on the first run)."""
@@ -473,12 +473,13 @@ def _cholesky_screen(V, ptr, idx, b1, b2, min_rcond, rows, Gs):  # pragma: no co
         most = max(most, ptr[i + 1] - ptr[i])
     u = np.empty(most)
     v = np.empty(most)
-    unsure = np.zeros(len(rows), dtype=np.bool_)
+    unsure = np.empty(len(rows), dtype=np.int64)
+    n_unsure = 0
+    G = np.empty((6, 6))
     H = np.empty((6, 6))
     p = np.empty(6)
     for t in range(len(rows)):
         i = rows[t]
-        G = Gs[t]
         start, k = ptr[i], ptr[i + 1] - ptr[i]
         c = idx[start]
         # the normalized design (as _design): tangent coordinates over their RMS radius
@@ -518,8 +519,11 @@ def _cholesky_screen(V, ptr, idx, b1, b2, min_rcond, rows, Gs):  # pragma: no co
             for a in range(j + 1, 6):
                 for b in range(j + 1, 6):
                     H[a, b] -= H[a, j] * H[b, j]
-        unsure[t] = not definite
-    return unsure
+        if not definite:
+            Gs[n_unsure] = G
+            unsure[n_unsure] = t
+            n_unsure += 1
+    return unsure[:n_unsure]
 
 
 def _pca_normals(V: np.ndarray, ptr: np.ndarray, idx: np.ndarray) -> np.ndarray:
