@@ -152,7 +152,7 @@ class FixedPattern:
         Size of the matrix.
     slots : (slot, pattern_rows, pattern_cols) of int ndarrays, optional
         The layout a caller that knows its pattern's structure computed without sorting the
-        entries (:func:`segparam.refine.mesh_pattern`): every entry's slot, and the distinct
+        entries (:func:`segparam.refine.proxy_layout`): every entry's slot, and the distinct
         entries in column-major order (rows ascending within a column), exactly what
         ``np.unique`` of the entries' column-major keys gives. ``rows`` and ``cols`` are then
         not read.

@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit
 
 from .linalg import FixedPattern
-from .mesh import edges, face_areas
+from .mesh import face_areas
 from .quality import inverse_frames, jacobians, triangle_frames
 
 __all__ = [
@@ -413,70 +413,155 @@ def slim_refine(
 SYSTEM_REUSE = 0.5
 
 
-def mesh_pattern(
-    local: np.ndarray, m: int, entry: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """The layout of :class:`_ProxySystem`'s matrix for :class:`segparam.linalg.FixedPattern`,
-    read off the mesh's edges instead of sorting its entries (``np.unique`` of 21 keys per face
-    was 6% of the 1M-face brain's parameterize stage).
+@njit(cache=True, nogil=True)
+def proxy_layout(F, faces, n):  # pragma: no cover - compiled
+    """The layout of :class:`_ProxySystem`'s matrix over the vertices of ``F[faces]``, for
+    :class:`segparam.linalg.FixedPattern`, read off the faces' vertex rings (one pass each, no
+    sort of the entries: ``np.unique`` of 21 keys per face was 6% of the 1M-face brain's
+    parameterize stage, and its numpy replacement from the edges most of a small system's set-up).
 
-    The matrix is ``[[A, B^T], [B, C]]`` over ``(u, v)``, each block with the pattern of the
-    vertex graph and its diagonal; its lower triangle holds, in column ``c`` (``c < m``), the
-    rows ``r >= c`` of the neighbourhood ``nb(c)`` (``c`` and its neighbours), then ``m + nb(c)``;
-    in column ``m + c``, the rows ``m + r``, ``r >= c``. With ``nb(c)`` sorted (the neighbours
-    below ``c`` (edges whose larger end is ``c``), ``c``, those above), an entry's slot is its
-    column's start plus its row's rank in ``nb(c)``.
+    The matrix is ``[[A, B^T], [B, C]]`` over ``(u, v)`` of the ``m`` vertices, each block with
+    the pattern of the vertex graph and its diagonal. Its lower triangle holds, in column
+    ``q < m``, the rows ``r >= q`` of the ring ``nb(q)`` (``q`` and its neighbours, ascending),
+    then ``m + nb(q)``; in column ``m + q``, the rows ``m + r``, ``r >= q``: column-major, rows
+    ascending, exactly what ``np.unique`` of the entries' column-major keys gives. An entry's
+    slot is its column's start plus its row's rank there.
 
     Parameters
     ----------
-    local : (k, 3) int ndarray
-        The faces, in vertex indices ``0 .. m - 1``.
-    m : int
-    entry : (e,) int ndarray
-        The lower-triangle entries of the ``(k, 36)`` table of :class:`_ProxySystem`
-        (``(a, b, i, j)`` row-major), followed in the matrix by the ``2 m`` diagonal entries.
+    F : (m_all, 3) int ndarray
+    faces : (k,) int ndarray
+        The faces of the system (a face may name a vertex twice).
+    n : int
+        Number of vertices ``F`` indexes.
 
     Returns
     -------
-    (slot, rows, cols), or None for a face with a repeated vertex (``np.unique`` then).
+    verts : (m,) int ndarray
+        The vertices of the faces, ascending (the system's vertex ``i`` is ``verts[i]``).
+    local : (k, 3) int ndarray
+        The faces in those indices.
+    entry : (e,) int ndarray
+        The lower-triangle entries of the ``(k, 36)`` table (``(a, b, i, j)`` row-major: row
+        ``local[t, i] + a m``, column ``local[t, j] + b m``), in table order ...
+    rows, cols : (e,) int ndarrays
+        ... their rows and columns ...
+    slot : (e + 2 m,) int ndarray
+        ... and their slots in the pattern, followed by the ``2 m`` diagonal entries' slots.
+    pattern_rows, pattern_cols : int ndarrays
+        The pattern, column-major.
     """
-    if len(local) == 0 or np.any(
-        (local[:, 0] == local[:, 1]) | (local[:, 1] == local[:, 2]) | (local[:, 2] == local[:, 0])
-    ):
-        return None
-    E, h2e = edges(local)
-    lo, hi = E[:, 0], E[:, 1]
-    n_up = np.bincount(lo, minlength=m)
-    n_low = np.bincount(hi, minlength=m)
-    rank_up = np.arange(len(E)) - (np.cumsum(n_up) - n_up)[lo]  # E is sorted by (lo, hi)
-    by_hi = np.argsort(hi, kind="stable")  # by (hi, lo)
-    rank_low = np.empty(len(E), dtype=np.int64)
-    rank_low[by_hi] = np.arange(len(E)) - (np.cumsum(n_low) - n_low)[hi[by_hi]]
-    length = np.concatenate([2 * n_up + n_low + 2, n_up + 1])
-    start = np.cumsum(length) - length
-    # per face, corners (i, j): the rank of row vertex p = F_i in nb(q), q = F_j
-    half = np.array([[0, 0, 2], [0, 0, 1], [2, 1, 0]])  # the half-edge joining corners i, j
-    e = h2e.reshape(-1, 3)[:, half]
-    p, q = local[:, :, None], local[:, None, :]
-    low_q = n_low[q]
-    rank = np.where(p > q, low_q + 1 + rank_up[e], rank_low[e])
-    rank[:, [0, 1, 2], [0, 1, 2]] = low_q[:, 0]  # p == q (low_q[:, 0, j] is q = F_j's)
-    top = rank - low_q  # blocks (0, 0) and (1, 1): column q's rows from q
-    blocks = [start[q] + top, start[q], start[q] + n_up[q] + 1 + rank, start[m + q] + top]
-    slot = np.stack([np.broadcast_to(x, rank.shape) for x in blocks], axis=1)  # k, (a, b), i, j
-    slot = np.concatenate([slot.ravel()[entry], start])  # the diagonal: each column's first
-    # the pattern itself, column by column: the diagonals, the edges in blocks (0, 0), (1, 1) and
-    # both ways in (1, 0), and block (1, 0)'s diagonal
-    c = np.arange(m)
-    up = 1 + rank_up  # edge (hi, lo)'s row among column lo's rows from lo
-    where = [start, start[lo] + up, start[m + lo] + up, start[lo] + n_up[lo] + 1 + n_low[lo] + up,
-             start[hi] + n_up[hi] + 1 + rank_low, start[c] + n_up + 1 + n_low]  # fmt: skip
-    pattern_rows = np.empty(int(start[-1] + length[-1]), dtype=np.int64)
-    pattern_cols = np.empty_like(pattern_rows)
-    where = np.concatenate(where)
-    pattern_rows[where] = np.concatenate([c, m + c, hi, m + hi, m + hi, m + lo, m + c])
-    pattern_cols[where] = np.concatenate([c, m + c, lo, m + lo, lo, hi, c])
-    return slot, pattern_rows, pattern_cols
+    k = len(faces)
+    index = np.full(n, -1, dtype=np.int64)
+    for t in range(k):
+        for c in range(3):
+            index[F[faces[t], c]] = 0
+    m = 0
+    for v in range(n):
+        if index[v] == 0:
+            index[v] = m
+            m += 1
+    verts = np.empty(m, dtype=np.int64)
+    for v in range(n):
+        if index[v] >= 0:
+            verts[index[v]] = v
+    local = np.empty((k, 3), dtype=np.int64)
+    for t in range(k):
+        for c in range(3):
+            local[t, c] = index[F[faces[t], c]]
+    # rings: each vertex itself, then the other corners of its faces; sorted, repeats dropped
+    cap = np.ones(m, dtype=np.int64)
+    for t in range(k):
+        for c in range(3):
+            cap[local[t, c]] += 2
+    ring_ptr = np.zeros(m + 1, dtype=np.int64)
+    for v in range(m):
+        ring_ptr[v + 1] = ring_ptr[v] + cap[v]
+    ring = np.empty(ring_ptr[m], dtype=np.int64)
+    size = np.ones(m, dtype=np.int64)
+    for v in range(m):
+        ring[ring_ptr[v]] = v
+    for t in range(k):
+        for c in range(3):
+            v = local[t, c]
+            for d in range(3):
+                w = local[t, d]
+                if w != v:
+                    ring[ring_ptr[v] + size[v]] = w
+                    size[v] += 1
+    below = np.zeros(m, dtype=np.int64)  # ring members under the vertex: its rank in its ring
+    for v in range(m):
+        a, length = ring_ptr[v], 0
+        for p in range(a, a + size[v]):  # insertion of ring[p] into the sorted distinct prefix
+            u, q = ring[p], a + length
+            while q > a and ring[q - 1] > u:
+                q -= 1
+            if q > a and ring[q - 1] == u:
+                continue
+            for r in range(a + length, q, -1):
+                ring[r] = ring[r - 1]
+            ring[q] = u
+            length += 1
+        size[v] = length
+        while ring[a + below[v]] < v:
+            below[v] += 1
+    start = np.zeros(2 * m + 1, dtype=np.int64)
+    for v in range(m):
+        above = size[v] - below[v]  # rows r >= v of the ring
+        start[v + 1] = above + size[v]
+        start[m + v + 1] = above
+    for c in range(2 * m):
+        start[c + 1] += start[c]
+    pattern_rows = np.empty(start[2 * m], dtype=np.int64)
+    pattern_cols = np.empty(start[2 * m], dtype=np.int64)
+    for v in range(m):
+        a, above = ring_ptr[v], size[v] - below[v]
+        for r in range(above):
+            pattern_rows[start[v] + r] = ring[a + below[v] + r]
+            pattern_rows[start[m + v] + r] = m + ring[a + below[v] + r]
+            pattern_cols[start[v] + r] = v
+            pattern_cols[start[m + v] + r] = m + v
+        for r in range(size[v]):
+            pattern_rows[start[v] + above + r] = m + ring[a + r]
+            pattern_cols[start[v] + above + r] = v
+    # the entries: blocks (0, 0) and (1, 1) where p >= q, block (1, 0) always, (0, 1) never
+    count = 0
+    for t in range(k):
+        for i in range(3):
+            for j in range(3):
+                count += 1 + 2 * (local[t, i] >= local[t, j])
+    entry = np.empty(count, dtype=np.int64)
+    rows = np.empty(count, dtype=np.int64)
+    cols = np.empty(count, dtype=np.int64)
+    slot = np.empty(count + 2 * m, dtype=np.int64)
+    e = 0
+    for t in range(k):
+        for a in range(2):
+            for b in range(2):
+                for i in range(3):
+                    for j in range(3):
+                        p, q = local[t, i], local[t, j]
+                        if a < b or (a == b and p < q):
+                            continue
+                        rank = 0  # of p in q's ring
+                        while ring[ring_ptr[q] + rank] != p:
+                            rank += 1
+                        entry[e] = t * 36 + ((2 * a + b) * 3 + i) * 3 + j
+                        rows[e], cols[e] = p + a * m, q + b * m
+                        if a == b:
+                            slot[e] = start[q + a * m] + rank - below[q]
+                        else:
+                            slot[e] = start[q] + size[q] - below[q] + rank
+                        e += 1
+    for c in range(2 * m):
+        slot[count + c] = start[c]  # each column's first row is its diagonal
+    return verts, local, entry, rows, cols, slot, pattern_rows, pattern_cols
+
+
+#: The (k, 36) table of :class:`_ProxySystem`'s entries per face, ``(a, b, i, j)`` row-major:
+#: each entry's block ``2 a + b`` and its corners ``i``, ``j``.
+_A, _B, _I, _J = (x.ravel() for x in np.indices((2, 2, 3, 3)))
+_BLOCK = 2 * _A + _B
 
 
 class _ProxySystem:
@@ -493,36 +578,24 @@ class _ProxySystem:
 
     def __init__(self, F: np.ndarray, faces: np.ndarray, n: int, stiffness: np.ndarray) -> None:
         self.faces = faces
-        self.verts = np.unique(F[faces])
-        self.size = len(self.verts)
-        m = self.size
-        index = np.full(n, -1)
-        index[self.verts] = np.arange(m)
+        verts, _, self._entry, self._rows, self._cols, slot, p_rows, p_cols = proxy_layout(
+            F, faces, n
+        )
+        self.verts = verts
+        self.size = m = len(verts)
         self._where = np.full(len(F), -1)
         self._where[faces] = np.arange(len(faces))
-        # per face, entry (a, b, i, j): row index[F_i] + a m, column index[F_j] + b m
-        local = index[F[faces]]  # (k, 3)
-        a, b, i, j = (x.ravel() for x in np.indices((2, 2, 3, 3)))
-        rows = local[:, i] + a * m
-        cols = local[:, j] + b * m
-        lower = rows >= cols
-        self._entry = np.flatnonzero(lower)  # into the (k, 36) table, row-major
-        self._rows, self._cols = rows[lower], cols[lower]
-        diag = np.arange(2 * m)
-        self._pattern = FixedPattern(
-            np.concatenate([self._rows, diag]), np.concatenate([self._cols, diag]), 2 * m,
-            slots=mesh_pattern(local, m, self._entry),
-        )  # fmt: skip
-        self._stiffness = stiffness[faces][:, i, j]  # (k, 36), reordered like (a, b, i, j)
-        self._block = 2 * a + b
-        self._dofs = np.concatenate([self.verts, self.verts + n])
+        self._pattern = FixedPattern(self._rows, self._cols, 2 * m, slots=(slot, p_rows, p_cols))
+        # per face, entry (a, b, i, j) of the (k, 36) table: row F_i + a m, column F_j + b m
+        self._stiffness = stiffness[faces][:, _I, _J]  # (k, 36), reordered like (a, b, i, j)
+        self._dofs = np.concatenate([verts, verts + n])
 
     def solve(self, faces: np.ndarray, W2: np.ndarray, move: np.ndarray, rhs: np.ndarray):
         """``H^-1 rhs`` over all ``2 n`` values (0 for the vertices that do not move), ``H`` at
         the weights ``W2`` of ``faces`` (a subset of the system's faces)."""
         weights = np.zeros((len(self.faces), 4))
         weights[self._where[faces]] = W2.reshape(-1, 4)
-        values = (weights[:, self._block] * self._stiffness).ravel()[self._entry]
+        values = (weights[:, _BLOCK] * self._stiffness).ravel()[self._entry]
         free = np.concatenate([move[self.verts], move[self.verts]])
         values = values * (free[self._rows] & free[self._cols])
         solve = self._pattern.solver(np.concatenate([values, (~free).astype(np.float64)]))

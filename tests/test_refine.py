@@ -359,24 +359,36 @@ def _unique_layout(local: np.ndarray, m: int):
 
 
 @pytest.mark.parametrize("seed", range(40))
-def test_the_proxy_pattern_read_off_the_edges_is_the_sorted_one(seed):
-    from segparam.refine import mesh_pattern
+def test_the_proxy_layout_read_off_the_rings_is_the_sorted_one(seed):
+    """``proxy_layout`` (compiled, from the vertex rings) gives the system's vertices, entries
+    and layout that sorting gives: ``np.unique`` of the vertices and of the entries'
+    column-major keys, on a grid and on face soups (non-manifold edges, repeated faces, faces
+    naming a vertex twice), some faces left out."""
+    from segparam.refine import proxy_layout
 
     rng = np.random.default_rng(seed)
     if seed == 0:  # a regular grid
-        _, local = tri_grid(6, 5)
-    else:  # a face soup: non-manifold edges, repeated faces, any vertex order
+        _, F = tri_grid(6, 5)
+    elif seed < 20:  # a face soup: non-manifold edges, repeated faces, any vertex order
         n = int(rng.integers(3, 30))
-        local = np.array([rng.choice(n, 3, replace=False) for _ in range(rng.integers(1, 50))])
-    m = int(local.max()) + 1
-    used = np.zeros(m, dtype=bool)
-    used[local] = True
-    local = (np.cumsum(used) - 1)[local]  # every vertex in a face, as in the proxy system
-    m = int(used.sum())
-    entry, expected = _unique_layout(local, m)
-    for got, want in zip(mesh_pattern(local, m, entry), expected, strict=True):
+        F = np.array([rng.choice(n, 3, replace=False) for _ in range(rng.integers(1, 50))])
+    else:  # ... and faces that name a vertex twice (or three times)
+        F = rng.integers(0, int(rng.integers(2, 20)), size=(int(rng.integers(1, 50)), 3))
+    faces = np.flatnonzero(rng.random(len(F)) < 0.8) if seed else np.arange(len(F))
+    if len(faces) == 0:
+        faces = np.array([0])
+    n = int(F.max()) + 3  # vertices no face of the system uses, too
+    verts, local, entry, rows, cols, *slots = proxy_layout(F, faces, n)
+    np.testing.assert_array_equal(verts, np.unique(F[faces]))
+    np.testing.assert_array_equal(verts[local], F[faces])
+    m = len(verts)
+    want_entry, expected = _unique_layout(local, m)
+    np.testing.assert_array_equal(entry, want_entry)
+    a, b, i, j = (x.ravel() for x in np.indices((2, 2, 3, 3)))
+    np.testing.assert_array_equal(rows, (local[:, i] + a * m).ravel()[entry])
+    np.testing.assert_array_equal(cols, (local[:, j] + b * m).ravel()[entry])
+    for got, want in zip(slots, expected, strict=True):
         np.testing.assert_array_equal(got, want)
-    assert mesh_pattern(np.array([[0, 1, 1]]), 2, entry[:0]) is None  # a repeated vertex
 
 
 @pytest.mark.parametrize("seed", range(6))
