@@ -49,7 +49,6 @@ from .linalg import lowest_pairs, one_blas_thread, smallest_eigenpairs, spd_solv
 from .mesh import (
     boundary_edges,
     boundary_loops,
-    boundary_pieces,
     check_mesh,
     edges,
     face_areas,
@@ -70,7 +69,6 @@ from .quality import (
     chart_quality,
     inverse_frames,
     jacobians,
-    segment_pairs_cross,
     signed_areas,
     singular_values,
     triangle_frames,
@@ -1584,7 +1582,8 @@ def charts_quality(
     )
     flipped = (sa < 0) & ~degenerate
 
-    interior_bad, boundary_bad, B = angle_sum_violations(uv, F, n)
+    B = _boundary_half_edges(F, n)
+    interior_bad, boundary_bad, _ = angle_sum_violations(uv, F, n, boundary=B)
 
     out = {
         "n_flipped": np.bincount(face_chart, weights=flipped, minlength=n_charts).astype(np.int64),
@@ -1611,27 +1610,66 @@ def charts_quality(
 def _charts_crossings(
     uv: np.ndarray, B: np.ndarray, vert_chart: np.ndarray, n_charts: int
 ) -> np.ndarray:
-    """:func:`segparam.quality.boundary_crossings` of every chart: one k-d tree for all.
-
-    Each chart's segment midpoints are divided by its longest segment and the charts are set
-    4 apart along a third axis, so one radius-1 pair query finds, for every chart, the pairs its
-    own query (radius: its longest segment) would find, and no pair across charts.
-    """
-    out = np.zeros(n_charts, dtype=np.int64)
+    """:func:`segparam.quality.boundary_crossings` of every chart: the boundary segments of all
+    charts swept once along u (:func:`_sweep_crossings`)."""
     if len(B) < 2:
-        return out
+        return np.zeros(n_charts, dtype=np.int64)
     chart = vert_chart[B[:, 0]]
     P0, P1 = uv[B[:, 0]], uv[B[:, 1]]
-    mid = 0.5 * (P0 + P1)
-    r = _chart_max(chart, np.linalg.norm(P1 - P0, axis=1), n_charts)
-    r = np.where(r > 0, r, 1.0)
-    pts = np.column_stack([mid / r[chart][:, None], 4.0 * chart])
-    pairs = cKDTree(pts).query_pairs(1 + 1e-9, output_type="ndarray")
-    if len(pairs) == 0:
-        return out
-    i, j = pairs[:, 0], pairs[:, 1]
-    hit = segment_pairs_cross(P0, P1, B, i, j)
-    return np.bincount(chart[i], weights=hit, minlength=n_charts).astype(np.int64)
+    low, high = np.minimum(P0, P1), np.maximum(P0, P1)
+    order = np.lexsort((low[:, 0], chart))
+    return _sweep_crossings(P0, P1, B, chart, order, low, high, n_charts)
+
+
+@njit(cache=True, nogil=True)
+def _sweep_crossings(P0, P1, B, chart, order, low, high, n_charts):  # pragma: no cover
+    """Per chart, the pairs of its boundary segments that meet (sharing no endpoint index).
+
+    The segments, ordered by chart then by their least u (``order``), are swept: segment ``i``
+    is tested against the next ones of its chart while their least u is at most its greatest,
+    and their boxes overlap in v too; a pair is tested as ``(lower index, higher index)`` with
+    :func:`segparam.quality.segment_pairs_cross`'s arithmetic, term by term (it replaced a k-d
+    tree of the midpoints and that function over the pairs it found: the same counts on every
+    captured call, BENCHMARKS.md section 0.1, session 17).
+    """
+    out = np.zeros(n_charts, dtype=np.int64)
+    k = len(order)
+    for p in range(k):
+        i = order[p]
+        for q in range(p + 1, k):
+            j = order[q]
+            if chart[j] != chart[i] or low[j, 0] > high[i, 0]:
+                break
+            if low[j, 1] > high[i, 1] or low[i, 1] > high[j, 1]:
+                continue
+            a, b = (i, j) if i < j else (j, i)
+            if _segments_cross(P0, P1, B, a, b):
+                out[chart[i]] += 1
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _orient(px, py, qx, qy, sx, sy):  # pragma: no cover - compiled
+    return (qx - px) * (sy - py) - (qy - py) * (sx - px)
+
+
+@njit(cache=True, nogil=True)
+def _segments_cross(P0, P1, B, i, j):  # pragma: no cover - compiled
+    """:func:`segparam.quality.segment_pairs_cross` of the one pair ``(i, j)``."""
+    if B[i, 0] == B[j, 0] or B[i, 0] == B[j, 1] or B[i, 1] == B[j, 0] or B[i, 1] == B[j, 1]:
+        return False
+    ax, ay, bx, by = P0[i, 0], P0[i, 1], P1[i, 0], P1[i, 1]
+    cx, cy, dx, dy = P0[j, 0], P0[j, 1], P1[j, 0], P1[j, 1]
+    d1, d2 = _orient(cx, cy, dx, dy, ax, ay), _orient(cx, cy, dx, dy, bx, by)
+    d3, d4 = _orient(ax, ay, bx, by, cx, cy), _orient(ax, ay, bx, by, dx, dy)
+    if not (d1 * d2 <= 0 and d3 * d4 <= 0):
+        return False
+    if d1 == 0 and d2 == 0:  # collinear: they meet if their projections on the line overlap
+        tx, ty = bx - ax, by - ay
+        pa, pb = ax * tx + ay * ty, bx * tx + by * ty
+        pc, pd = cx * tx + cy * ty, dx * tx + dy * ty
+        return max(min(pa, pb), min(pc, pd)) <= min(max(pa, pb), max(pc, pd))
+    return True
 
 
 def _charts_loops_oriented(
@@ -1639,14 +1677,14 @@ def _charts_loops_oriented(
 ) -> np.ndarray:
     """Per chart: its largest uv boundary loop counter-clockwise, all others clockwise.
 
-    Loops are the pieces of the boundary graph; a loop's signed area is the shoelace sum over
-    its directed edges, in any order (needs a manifold boundary, as
+    Loops are the pieces of the boundary graph (:func:`_boundary_pieces`); a loop's signed area
+    is the shoelace sum over its directed edges, in any order (needs a manifold boundary, as
     :func:`segparam.mesh.boundary_loops` does).
     """
     out = np.zeros(n_charts, dtype=bool)
     if len(B) == 0:
         return out
-    verts, idx, n_loops, loop = boundary_pieces(B)
+    verts, idx, n_loops, loop = _boundary_pieces(B, len(uv))
     p, q = uv[B[:, 0]], uv[B[:, 1]]
     area = 0.5 * np.bincount(
         loop[idx[:, 0]], weights=p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0], minlength=n_loops
@@ -1661,6 +1699,95 @@ def _charts_loops_oriented(
     bad = np.bincount(loop_chart, weights=wrong, minlength=n_charts)
     has = np.bincount(loop_chart, minlength=n_charts) > 0
     return has & (bad == 0)
+
+
+@njit(cache=True, nogil=True)
+def _boundary_half_edges(F, n):  # pragma: no cover - compiled
+    """:func:`segparam.mesh.boundary_edges` of faces ``F`` on ``n`` vertices: the half-edges
+    ``F[f, k] -> F[f, k + 1]`` whose edge no other half-edge has, in half-edge order ``3 f + k``.
+    Each edge is found among the edges of its lower vertex (a few), with no sort of the mesh's
+    edges (``charts_quality`` measures each batch of charts two to six times)."""
+    m = len(F)
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    for f in range(m):
+        for k in range(3):
+            ptr[min(F[f, k], F[f, (k + 1) % 3]) + 1] += 1
+    for v in range(n):
+        ptr[v + 1] += ptr[v]
+    upper = np.empty(3 * m, dtype=np.int64)
+    fill = ptr[:-1].copy()
+    for f in range(m):
+        for k in range(3):
+            a, b = F[f, k], F[f, (k + 1) % 3]
+            lo = min(a, b)
+            upper[fill[lo]] = max(a, b)
+            fill[lo] += 1
+    single = np.zeros(3 * m, dtype=np.bool_)
+    count = 0
+    for f in range(m):
+        for k in range(3):
+            a, b = F[f, k], F[f, (k + 1) % 3]
+            lo, hi = min(a, b), max(a, b)
+            seen = 0
+            for p in range(ptr[lo], ptr[lo + 1]):
+                seen += upper[p] == hi
+            if seen == 1:
+                single[3 * f + k] = True
+                count += 1
+    B = np.empty((count, 2), dtype=np.int64)
+    e = 0
+    for h in range(3 * m):
+        if single[h]:
+            f, k = h // 3, h % 3
+            B[e, 0], B[e, 1] = F[f, k], F[f, (k + 1) % 3]
+            e += 1
+    return B
+
+
+@njit(cache=True, nogil=True)
+def _boundary_pieces(B, n):  # pragma: no cover - compiled
+    """:func:`segparam.mesh.boundary_pieces` of half-edges ``B`` on ``n`` vertices, compiled
+    (union-find): the boundary vertices (ascending), ``B`` in their positions, the number of
+    pieces and each vertex's piece, pieces numbered by their lowest vertex as scipy's
+    connected components number them."""
+    pos = np.full(n, -1, dtype=np.int64)
+    for e in range(len(B)):
+        pos[B[e, 0]] = 0
+        pos[B[e, 1]] = 0
+    nb = 0
+    for v in range(n):
+        if pos[v] == 0:
+            pos[v] = nb
+            nb += 1
+    verts = np.empty(nb, dtype=np.int64)
+    for v in range(n):
+        if pos[v] >= 0:
+            verts[pos[v]] = v
+    idx = np.empty((len(B), 2), dtype=np.int64)
+    parent = np.arange(nb)
+    for e in range(len(B)):
+        a, b = pos[B[e, 0]], pos[B[e, 1]]
+        idx[e, 0], idx[e, 1] = a, b
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        while parent[b] != b:
+            parent[b] = parent[parent[b]]
+            b = parent[b]
+        if a != b:
+            parent[max(a, b)] = min(a, b)
+    label = np.full(nb, -1, dtype=np.int64)
+    piece = np.empty(nb, dtype=np.int64)
+    n_pieces = 0
+    for v in range(nb):
+        r = v
+        while parent[r] != r:
+            r = parent[r]
+        if label[r] < 0:
+            label[r] = n_pieces
+            n_pieces += 1
+        piece[v] = label[r]
+    return verts, idx, n_pieces, piece
 
 
 def _charts_distortion(

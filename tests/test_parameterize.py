@@ -436,6 +436,57 @@ def test_charts_quality_is_chart_quality_chart_by_chart():
         np.testing.assert_array_equal(some[name][~which], like[name][~which], err_msg=name)
 
 
+@pytest.mark.parametrize("seed", range(8))
+def test_the_compiled_boundary_topology_is_the_sorted_one(seed):
+    """``charts_quality``'s compiled boundary passes against the numpy and scipy forms they
+    replaced: the boundary half-edges (``mesh.boundary_edges``, same order), their pieces
+    (``mesh.boundary_pieces``: scipy's connected components, same numbering) and each chart's
+    crossing count (``quality.boundary_crossings``: a k-d tree of the midpoints) on maps
+    jittered until their boundaries cross many times, of charts with holes and pinched
+    boundaries (two loops through one vertex)."""
+    from segparam.mesh import boundary_edges, boundary_pieces
+    from segparam.parameterize import _boundary_half_edges, _boundary_pieces, _charts_crossings
+    from segparam.quality import boundary_crossings
+
+    rng = np.random.default_rng(seed)
+    parts = []
+    for _ in range(4):
+        V, F = tri_grid(int(rng.integers(3, 9)), int(rng.integers(3, 9)))
+        F = F[rng.random(len(F)) > 0.25]  # holes, pinches, pieces
+        used, F = np.unique(F, return_inverse=True)
+        parts.append((V[used], F.reshape(-1, 3)))
+    Vu, Fu, vert_chart = _union(parts)
+    n = len(Vu)
+    B = _boundary_half_edges(Fu, n)
+    np.testing.assert_array_equal(B, boundary_edges(Fu))
+    for got, want in zip(_boundary_pieces(B, n), boundary_pieces(B), strict=True):
+        np.testing.assert_array_equal(got, want)
+    uv = Vu[:, :2] + rng.normal(scale=0.05 * (seed % 4), size=(n, 2))
+    chart = vert_chart[B[:, 0]]
+    want = [boundary_crossings(uv, B[chart == c]) for c in range(len(parts))]
+    np.testing.assert_array_equal(_charts_crossings(uv, B, vert_chart, len(parts)), want)
+    if seed % 4 == 3:
+        assert sum(want) > 10
+
+
+def test_the_compiled_segment_test_is_the_array_one():
+    """``_segments_cross`` (one pair, compiled) against ``quality.segment_pairs_cross`` on every
+    pair of 60 segments with small integer ends: many touch, overlap collinearly or share an
+    endpoint index, where the tests' ``<=`` and ``==`` decide."""
+    from segparam.parameterize import _segments_cross
+    from segparam.quality import segment_pairs_cross
+
+    rng = np.random.default_rng(0)
+    B = rng.integers(0, 40, size=(60, 2))
+    uv = rng.integers(0, 4, size=(40, 2)).astype(float)
+    P0, P1 = uv[B[:, 0]], uv[B[:, 1]]
+    i, j = np.triu_indices(len(B), 1)
+    want = segment_pairs_cross(P0, P1, B, i, j)
+    got = [_segments_cross(P0, P1, B, a, b) for a, b in zip(i.tolist(), j.tolist(), strict=True)]
+    np.testing.assert_array_equal(got, want)
+    assert want.sum() > 100
+
+
 def test_isometric_fit_undoes_a_stretch_by_hand():
     """Y = X R S (a rotation, then a stretch along the axes): M = S^-2 fits every triangle
     exactly (G_t^T M G_t = I), A = M^(1/2) = S^-1, so uv = Y S^-1 = X R, the flat chart rotated."""
