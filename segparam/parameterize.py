@@ -73,7 +73,13 @@ from .quality import (
     singular_values,
     triangle_frames,
 )
-from .refine import ANGLE_WEIGHT, MAX_STRETCH_INCREASE, SMALL_CHART_FACES, slim_refine
+from .refine import (
+    ANGLE_WEIGHT,
+    MAX_STRETCH_INCREASE,
+    SMALL_CHART_FACES,
+    _gradient_coefficients,
+    slim_refine,
+)
 
 log = logging.getLogger(__name__)
 
@@ -1934,7 +1940,9 @@ def _arap_charts(
     the others go on. Returns the maps and every chart's number of global steps.
     """
     face_chart = vert_chart[F[:, 0]]
-    D = _gradient_operator(V, F, inv_frames)
+    frames = inverse_frames(triangle_frames(V, F)) if inv_frames is None else inv_frames
+    D = _gradient_operator(V, F, frames)
+    coef = _gradient_coefficients(frames)  # D's rows, per face
     area = face_areas(V, F)
     w = np.repeat(area, 2)
     w_total = _chart_sum(face_chart, area, n_charts)
@@ -1946,17 +1954,8 @@ def _arap_charts(
     active = np.ones(n_charts, dtype=bool)
     steps = np.zeros(n_charts, dtype=np.int64)
     for step in range(iterations + 1):
-        G = (D @ uv).reshape(-1, 2, 2)
-        p = G[:, 0, 0] + G[:, 1, 1]
-        q = G[:, 0, 1] - G[:, 1, 0]
-        r = np.hypot(p, q)
-        r[r == 0] = 1.0
-        p, q = p / r, q / r
-        Rt = np.stack([np.stack([p, q], 1), np.stack([-q, p], 1)], 1)
-        energy = _chart_sum(face_chart, ((G - Rt) ** 2).sum(axis=(1, 2)) * area, n_charts)
+        Rt, energy, flipped = _arap_local(F, coef, uv, area, face_chart, n_charts)
         energy /= w_total
-        det = G[:, 0, 0] * G[:, 1, 1] - G[:, 0, 1] * G[:, 1, 0]
-        flipped = np.bincount(face_chart, weights=det <= 0, minlength=n_charts) > 0
         stop = (
             (step == iterations)
             | ((energy < tol) & ~flipped)
@@ -1972,12 +1971,94 @@ def _arap_charts(
             DT = D.T  # once: a transpose is a new matrix object each time
             L = (DT @ sp.diags(w) @ D).tocsc()
             solve = spd_solver(L[free][:, free])
-        rhs = DT @ (w[:, None] * Rt.reshape(-1, 2))
+        rhs = _arap_rhs(F, coef, Rt, area, len(V))
         new = np.zeros_like(uv)
         new[free] = solve(rhs[free])
         move = active[vert_chart]
         uv[move] = new[move]
     return uv, steps
+
+
+@njit(cache=True, nogil=True)
+def _sorted_corners(F, t, coef, k):  # pragma: no cover - compiled
+    """Face ``t``'s distinct corners in ascending vertex order and row ``k`` of its gradient
+    coefficients summed per corner: the entries of row ``2 t + k`` of :func:`_gradient_operator`
+    as the CSR matrix stores them (columns sorted, a vertex named twice summed)."""
+    v0, v1, v2 = F[t, 0], F[t, 1], F[t, 2]
+    c0, c1, c2 = coef[t, k, 0], coef[t, k, 1], coef[t, k, 2]
+    if v1 < v0:
+        v0, v1, c0, c1 = v1, v0, c1, c0
+    if v2 < v1:
+        v1, v2, c1, c2 = v2, v1, c2, c1
+        if v1 < v0:
+            v0, v1, c0, c1 = v1, v0, c1, c0
+    if v0 == v1 == v2:
+        return 1, v0, v0, v0, c0 + c1 + c2, 0.0, 0.0
+    if v0 == v1:
+        return 2, v0, v2, v2, c0 + c1, c2, 0.0
+    if v1 == v2:
+        return 2, v0, v1, v1, c0, c1 + c2, 0.0
+    return 3, v0, v1, v2, c0, c1, c2
+
+
+@njit(cache=True, nogil=True)
+def _arap_local(F, coef, uv, area, face_chart, n_charts):  # pragma: no cover - compiled
+    """ARAP's local step over every face of a disjoint union (:func:`_arap_charts`): each
+    triangle's closest rotation ``R^T`` (rows ``k``) to its Jacobian ``G = D uv`` (``G[t][k, c] =
+    J_t[c, k]``), and per chart the area-weighted sum of ``||G - R^T||_F^2`` and whether a
+    triangle is flipped (``det G <= 0``).
+
+    The arithmetic of the sparse and array forms it replaced, term by term: ``D @ uv`` row by
+    row over the sorted columns from 0.0 (scipy's CSR product), ``(p, q) / hypot(p, q)``, each
+    face's four squares summed in order and scaled by its area, the faces summed per chart in
+    order (``np.bincount``): the same bits.
+    """
+    m = len(F)
+    Rt = np.empty((m, 2, 2))
+    energy = np.zeros(n_charts)
+    flipped = np.zeros(n_charts, dtype=np.bool_)
+    G = np.empty((2, 2))
+    for t in range(m):
+        for k in range(2):
+            n_c, v0, v1, v2, a0, a1, a2 = _sorted_corners(F, t, coef, k)
+            for c in range(2):
+                acc = 0.0 + a0 * uv[v0, c]
+                if n_c > 1:
+                    acc += a1 * uv[v1, c]
+                if n_c > 2:
+                    acc += a2 * uv[v2, c]
+                G[k, c] = acc
+        p = G[0, 0] + G[1, 1]
+        q = G[0, 1] - G[1, 0]
+        r = np.hypot(p, q)
+        if r == 0:
+            r = 1.0
+        p, q = p / r, q / r
+        Rt[t, 0, 0], Rt[t, 0, 1], Rt[t, 1, 0], Rt[t, 1, 1] = p, q, -q, p
+        e00, e01, e10, e11 = G[0, 0] - p, G[0, 1] - q, G[1, 0] - (-q), G[1, 1] - p
+        e = e00 * e00 + e01 * e01 + e10 * e10 + e11 * e11
+        energy[face_chart[t]] += e * area[t]
+        if G[0, 0] * G[1, 1] - G[0, 1] * G[1, 0] <= 0:
+            flipped[face_chart[t]] = True
+    return Rt, energy, flipped
+
+
+@njit(cache=True, nogil=True)
+def _arap_rhs(F, coef, Rt, area, n):  # pragma: no cover - compiled
+    """ARAP's global step's right-hand side ``D^T (w R^T)`` (``w``: each face's area, twice),
+    as scipy's CSC product sums it: each vertex from 0.0, face row after face row."""
+    out = np.zeros((n, 2))
+    for t in range(len(F)):
+        for k in range(2):
+            n_c, v0, v1, v2, a0, a1, a2 = _sorted_corners(F, t, coef, k)
+            for c in range(2):
+                x = area[t] * Rt[t, k, c]
+                out[v0, c] += a0 * x
+                if n_c > 1:
+                    out[v1, c] += a1 * x
+                if n_c > 2:
+                    out[v2, c] += a2 * x
+    return out
 
 
 @dataclass(frozen=True)

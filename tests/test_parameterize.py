@@ -487,6 +487,51 @@ def test_the_compiled_segment_test_is_the_array_one():
     assert want.sum() > 100
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_the_compiled_arap_steps_are_the_sparse_ones_bit_for_bit(seed):
+    """ARAP's local step and right-hand side (``_arap_local``, ``_arap_rhs``, compiled) against
+    the sparse and array forms they replaced, to the last bit: ``G = D uv``, the closest
+    rotations, each chart's area-weighted energy and flip flag, ``D^T (w R^T)``; faces naming a
+    vertex twice included (the matrix sums such entries)."""
+    from segparam.parameterize import (
+        _arap_local,
+        _arap_rhs,
+        _chart_sum,
+        _gradient_operator,
+    )
+    from segparam.quality import inverse_frames, triangle_frames
+    from segparam.refine import _gradient_coefficients
+
+    rng = np.random.default_rng(seed)
+    n, m, n_charts = 30, 80, 3
+    V = rng.normal(size=(n, 3))
+    F = np.array([rng.choice(n, 3, replace=False) for _ in range(m)])
+    if seed % 2 == 0:
+        F[:5, 1] = F[:5, 0]  # a repeated corner
+    with np.errstate(divide="ignore", invalid="ignore"):  # the repeated corners' frames
+        frames = inverse_frames(triangle_frames(V, F))
+    frames[~np.isfinite(frames)] = 1.0
+    D = _gradient_operator(V, F, frames)
+    uv = rng.normal(size=(n, 2))
+    area = rng.random(m)
+    face_chart = np.sort(rng.integers(0, n_charts, size=m))
+    G = (D @ uv).reshape(-1, 2, 2)
+    p, q = G[:, 0, 0] + G[:, 1, 1], G[:, 0, 1] - G[:, 1, 0]
+    r = np.hypot(p, q)
+    r[r == 0] = 1.0
+    p, q = p / r, q / r
+    Rt = np.stack([np.stack([p, q], 1), np.stack([-q, p], 1)], 1)
+    energy = _chart_sum(face_chart, ((G - Rt) ** 2).sum(axis=(1, 2)) * area, n_charts)
+    det = G[:, 0, 0] * G[:, 1, 1] - G[:, 0, 1] * G[:, 1, 0]
+    flipped = np.bincount(face_chart, weights=det <= 0, minlength=n_charts) > 0
+    coef = _gradient_coefficients(frames)
+    got_Rt, got_energy, got_flipped = _arap_local(F, coef, uv, area, face_chart, n_charts)
+    assert got_Rt.tobytes() == Rt.tobytes() and got_energy.tobytes() == energy.tobytes()
+    np.testing.assert_array_equal(got_flipped, flipped)
+    rhs = D.T @ (np.repeat(area, 2)[:, None] * Rt.reshape(-1, 2))
+    assert _arap_rhs(F, coef, Rt, area, n).tobytes() == rhs.tobytes()
+
+
 def test_isometric_fit_undoes_a_stretch_by_hand():
     """Y = X R S (a rotation, then a stretch along the axes): M = S^-2 fits every triangle
     exactly (G_t^T M G_t = I), A = M^(1/2) = S^-1, so uv = Y S^-1 = X R, the flat chart rotated."""
