@@ -860,7 +860,7 @@ def _hessian_matrix(V, F, tangent, min_points, min_rcond, room=None):
     ``room``; all False without it, where a starved vertex raises InvalidMeshError)."""
     extra = np.zeros(len(V), dtype=np.int64)
     on_boundary = np.zeros(len(V), dtype=bool)
-    on_boundary[boundary_edges(F).ravel()] = True
+    on_boundary[_boundary_half_edges(F, len(V)).ravel()] = True  # as mesh.boundary_edges
     check = None  # vertices whose neighbourhood changed: all of them at first
     A = vertex_adjacency(F, len(V))
     nbr = dict(min_points=min_points, adjacency=A, room=room)
