@@ -78,6 +78,7 @@ from .refine import (
     MAX_STRETCH_INCREASE,
     SMALL_CHART_FACES,
     _gradient_coefficients,
+    number_marked,
     slim_refine,
 )
 
@@ -1760,15 +1761,8 @@ def _boundary_pieces(B, n):  # pragma: no cover - compiled
     for e in range(len(B)):
         pos[B[e, 0]] = 0
         pos[B[e, 1]] = 0
-    nb = 0
-    for v in range(n):
-        if pos[v] == 0:
-            pos[v] = nb
-            nb += 1
-    verts = np.empty(nb, dtype=np.int64)
-    for v in range(n):
-        if pos[v] >= 0:
-            verts[pos[v]] = v
+    verts = number_marked(pos)
+    nb = len(verts)
     idx = np.empty((len(B), 2), dtype=np.int64)
     parent = np.arange(nb)
     for e in range(len(B)):

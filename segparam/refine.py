@@ -414,6 +414,23 @@ SYSTEM_REUSE = 0.5
 
 
 @njit(cache=True, nogil=True)
+def number_marked(index):  # pragma: no cover - compiled
+    """Number the entries of ``index`` marked 0 (the others are -1) 0, 1, 2, ... in ascending
+    order, in place, and return the marked positions in that order (the numbering's inverse):
+    the vertices a set of faces or edges uses, compactly."""
+    m = 0
+    for v in range(len(index)):
+        if index[v] == 0:
+            index[v] = m
+            m += 1
+    marked = np.empty(m, dtype=np.int64)
+    for v in range(len(index)):
+        if index[v] >= 0:
+            marked[index[v]] = v
+    return marked
+
+
+@njit(cache=True, nogil=True)
 def proxy_layout(F, faces, n):  # pragma: no cover - compiled
     """The layout of :class:`_ProxySystem`'s matrix over the vertices of ``F[faces]``, for
     :class:`segparam.linalg.FixedPattern`, read off the faces' vertex rings (one pass each, no
@@ -456,15 +473,8 @@ def proxy_layout(F, faces, n):  # pragma: no cover - compiled
     for t in range(k):
         for c in range(3):
             index[F[faces[t], c]] = 0
-    m = 0
-    for v in range(n):
-        if index[v] == 0:
-            index[v] = m
-            m += 1
-    verts = np.empty(m, dtype=np.int64)
-    for v in range(n):
-        if index[v] >= 0:
-            verts[index[v]] = v
+    verts = number_marked(index)
+    m = len(verts)
     local = np.empty((k, 3), dtype=np.int64)
     for t in range(k):
         for c in range(3):
