@@ -1675,7 +1675,9 @@ def _segments_cross(P0, P1, B, i, j):  # pragma: no cover - compiled
         tx, ty = bx - ax, by - ay
         pa, pb = ax * tx + ay * ty, bx * tx + by * ty
         pc, pd = cx * tx + cy * ty, dx * tx + dy * ty
-        return max(min(pa, pb), min(pc, pd)) <= min(max(pa, pb), max(pc, pd))
+        # np.minimum / np.maximum: NaN propagates as in the array form
+        lo = np.maximum(np.minimum(pa, pb), np.minimum(pc, pd))
+        return lo <= np.minimum(np.maximum(pa, pb), np.maximum(pc, pd))
     return True
 
 
