@@ -861,8 +861,8 @@ def label_topology(F: np.ndarray, labels: np.ndarray, n_labels: int | None = Non
         ``components`` (vertex-connected pieces), ``loops`` (boundary loops; meaningful where
         the label is vertex-manifold), ``euler`` (``V - E + F``).
     """
-    F = np.asarray(F, dtype=np.int64)
-    labels = np.asarray(labels, dtype=np.int64)
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    labels = np.ascontiguousarray(labels, dtype=np.int64)
     if n_labels is None:
         n_labels = int(labels.max()) + 1 if len(labels) else 0
     n = int(n_labels)
@@ -872,39 +872,19 @@ def label_topology(F: np.ndarray, labels: np.ndarray, n_labels: int | None = Non
             "faces": zero, "vertices": zero, "edges": zero, "components": zero, "loops": zero,
             "euler": zero, "edge_manifold": np.ones(n, bool), "vertex_manifold": np.ones(n, bool),
         }  # fmt: skip
-    nv = int(F.max()) + 1
-    keys, Fl = np.unique((labels[:, None] * nv + F).ravel(), return_inverse=True)
-    Fl = Fl.reshape(-1, 3).astype(np.int64)
-    vlabel = keys // nv  # label of every vertex copy
-    n_v = len(keys)
-    E, h2e = edges(Fl)
-    elabel = vlabel[E[:, 0]]
-    count = np.bincount(h2e, minlength=len(E))
-    H = _half_edges(Fl)
-    forward = np.bincount(h2e, weights=(H[:, 0] < H[:, 1]).astype(float), minlength=len(E))
-    bad_edge = (count > 2) | ((count == 2) & (forward != 1))
-    bad_vertex = ~is_vertex_manifold(Fl, n_v, edge_index=(E, h2e))
-    # Vertex-connected pieces (vertex copies never join two labels).
-    _, comp = _cc(vertex_adjacency(Fl, n_v, edge_index=(E, h2e)), directed=False)
-    first = np.unique(comp, return_index=True)[1]
-    # Boundary loops: pieces of the graph of boundary half-edges.
-    B = H[count[h2e] == 1]
-    G = sp.coo_matrix((np.ones(len(B)), (B[:, 0], B[:, 1])), shape=(n_v, n_v))
-    _, loop = _cc(G, directed=False)
-    on_b = np.zeros(n_v, dtype=bool)
-    on_b[B.ravel()] = True
-    loop_first = np.unique(loop[on_b], return_index=True)[1]
-    out = {
-        "faces": np.bincount(labels, minlength=n),
-        "vertices": np.bincount(vlabel, minlength=n),
-        "edges": np.bincount(elabel, minlength=n),
-        "edge_manifold": np.bincount(elabel, weights=bad_edge, minlength=n) == 0,
-        "vertex_manifold": np.bincount(vlabel, weights=bad_vertex, minlength=n) == 0,
-        "components": np.bincount(vlabel[first], minlength=n),
-        "loops": np.bincount(vlabel[np.flatnonzero(on_b)[loop_first]], minlength=n),
-    }
-    out["euler"] = out["vertices"] - out["edges"] + out["faces"]
-    return out
+    if labels.min() < 0:
+        raise ValueError("labels must be non-negative")
+    n = max(n, int(labels.max()) + 1)  # as np.bincount's minlength
+    from .topology import label_counts  # compiled: numba is imported by the stages that call it
+
+    faces, vertices, n_edges, bad_edges, bad_vertices, components, loops = label_counts(
+        F, labels, n, int(F.max()) + 1
+    )
+    return {
+        "faces": faces, "vertices": vertices, "edges": n_edges,
+        "edge_manifold": bad_edges == 0, "vertex_manifold": bad_vertices == 0,
+        "components": components, "loops": loops, "euler": vertices - n_edges + faces,
+    }  # fmt: skip
 
 
 def disk_labels(

@@ -97,6 +97,53 @@ def test_label_topology_sees_orientation_and_empty_labels():
     assert not is_disk(F[labels == 0]) and is_disk(F[labels == 2])
 
 
+@pytest.mark.parametrize("seed", range(12))
+def test_label_topology_is_each_labels_own_topology(seed):
+    """``label_topology`` (compiled, all labels at once) against the per-mesh functions on each
+    label's faces alone: faces, vertices, edges, edge and vertex manifoldness, vertex-connected
+    pieces, boundary loops, Euler characteristic. Grids and a torus cut in random labels, some
+    faces turned against their neighbours, and face soups with repeated corners."""
+    from segparam.mesh import (
+        boundary_edges,
+        boundary_pieces,
+        edges,
+        is_edge_manifold,
+        is_vertex_manifold,
+    )
+
+    rng = np.random.default_rng(seed)
+    if seed < 4:
+        _, F = tri_grid(9, 7)
+    elif seed < 8:
+        m = trimesh.creation.torus(2.0, 0.7, major_sections=10, minor_sections=5)
+        F = np.asarray(m.faces)
+    else:
+        F = rng.integers(0, 25, size=(120, 3))  # repeated corners, non-manifold everything
+    F = F.copy()
+    turn = rng.random(len(F)) < 0.05
+    F[turn] = F[turn][:, ::-1]
+    labels = rng.integers(0, int(rng.integers(1, 12)), len(F))
+    n_labels = int(labels.max()) + 2  # and an empty label
+    t = label_topology(F, labels, n_labels)
+    for c in range(n_labels):
+        Fc = F[labels == c]
+        if len(Fc) == 0:
+            assert t["faces"][c] == t["vertices"][c] == t["edges"][c] == 0
+            continue
+        used, Fc = np.unique(Fc, return_inverse=True)
+        Fc = Fc.reshape(-1, 3)
+        E, h2e = edges(Fc)
+        B = boundary_edges(Fc)
+        loops = boundary_pieces(B)[2] if len(B) else 0
+        n_comp = connected_components(Fc, by="vertex")[0]
+        want = [len(Fc), len(used), len(E), is_edge_manifold(Fc),
+                bool(is_vertex_manifold(Fc, len(used)).all()), n_comp, loops,
+                len(used) - len(E) + len(Fc)]  # fmt: skip
+        got = [t[k][c] for k in ("faces", "vertices", "edges", "edge_manifold",
+                                 "vertex_manifold", "components", "loops", "euler")]  # fmt: skip
+        assert got == want, c
+
+
 # --------------------------------------------------------------------------------------------------
 # segment: small parts without spectral clustering
 
