@@ -103,6 +103,41 @@ def test_a_cold_cache_gets_the_packer_compiled_in_the_background(tmp_path):
     assert _run(script, tmp_path) == {"cold": False, "waited": False, "hits": 1, "misses": 0}
 
 
+REFINEMENT = """
+import json, sys
+sys.path.insert(0, {tests!r})
+import numpy as np
+from meshes import saddle, spherical_cap
+from segparam import parameterize, refine
+from segparam.parameterize import solve_charts
+kernels = [refine._slim_terms, refine._chart_energies, refine._step_bounds,
+           refine._energy_gradient, refine.proxy_layout, parameterize._arap_local,
+           parameterize._arap_rhs, parameterize._boundary_pieces, parameterize._sweep_crossings]
+parts = [spherical_cap(8, 8), saddle(8)]
+V = np.vstack([p[0] for p in parts])
+F = np.vstack([parts[0][1], parts[1][1] + len(parts[0][0])])
+vert_chart = np.repeat([0, 1], [len(p[0]) for p in parts])
+solve_charts(V, F, vert_chart, refine="slim")
+print(json.dumps({{
+    "hits": [sum(k.stats.cache_hits.values()) for k in kernels],
+    "misses": [sum(k.stats.cache_misses.values()) for k in kernels],
+}}))
+"""
+
+
+@pytest.mark.slow
+def test_the_background_compiles_the_refinement_kernels_as_the_solver_calls_them(tmp_path):
+    """The background process's head start on the solver's refinement and quality kernels
+    (``warmup._compile_refinement``) caches them with the argument types the solver's batches
+    use: a later process that solves two charts finds every one of them in the cache (hits, no
+    miss) instead of compiling it. Compiles the solver's kernels: about 10-20 s."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    code = "import segparam.warmup as w; w._compile_refinement()"
+    subprocess.run([sys.executable, "-c", code], check=True, env=env, cwd=tmp_path)
+    got = _run(REFINEMENT.format(tests=os.path.dirname(__file__)), tmp_path)
+    assert got["misses"] == [0] * 9 and all(h >= 1 for h in got["hits"]), got
+
+
 PREVIEW = """
 import json, subprocess, sys
 from segparam import render, warmup
