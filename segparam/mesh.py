@@ -877,8 +877,9 @@ def label_topology(F: np.ndarray, labels: np.ndarray, n_labels: int | None = Non
     n = max(n, int(labels.max()) + 1)  # as np.bincount's minlength
     from .topology import label_counts  # compiled: numba is imported by the stages that call it
 
+    order, start = group_by_label(labels, n)
     faces, vertices, n_edges, bad_edges, bad_vertices, components, loops = label_counts(
-        F, labels, n, int(F.max()) + 1
+        F, labels, order, start, int(F.max()) + 1
     )
     return {
         "faces": faces, "vertices": vertices, "edges": n_edges,

@@ -44,31 +44,21 @@ def _join(parent, a, b):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def label_counts(F, labels, n_labels, n_vertices):  # pragma: no cover - compiled
-    """Per label ``0 .. n_labels - 1`` (every label below ``n_labels``, ``F`` on
-    ``n_vertices`` vertices): faces, vertex copies, edges, edges that are not manifold (more
-    than two faces, or two that traverse it the same way), vertex copies that are not manifold
-    (their link, the opposite edges of their corners, in more than one piece), vertex-connected
-    pieces and boundary loops (pieces of the graph of the half-edges whose edge has one face).
+def label_counts(F, labels, order, start, n_vertices):  # pragma: no cover - compiled
+    """Per label ``0 .. n_labels - 1`` (``F`` on ``n_vertices`` vertices; the faces grouped by
+    label, :func:`segparam.mesh.group_by_label`: those of label ``k`` are
+    ``order[start[k] : start[k + 1]]``): faces, vertex copies, edges, edges that are not
+    manifold (more than two faces, or two that traverse it the same way), vertex copies that are
+    not manifold (their link, the opposite edges of their corners, in more than one piece),
+    vertex-connected pieces and boundary loops (pieces of the graph of the half-edges whose edge
+    has one face).
 
     Returns
     -------
     faces, vertices, edges, bad_edges, bad_vertices, components, loops : (n_labels,) int64
     """
     m = len(F)
-    # the faces grouped by label (a stable counting sort)
-    start = np.zeros(n_labels + 1, dtype=np.int64)
-    for f in range(m):
-        start[labels[f] + 1] += 1
-    for lab in range(n_labels):
-        start[lab + 1] += start[lab]
-    order = np.empty(m, dtype=np.int64)
-    fill = np.empty(n_labels, dtype=np.int64)
-    for lab in range(n_labels):
-        fill[lab] = start[lab]
-    for f in range(m):
-        order[fill[labels[f]]] = f
-        fill[labels[f]] += 1
+    n_labels = len(start) - 1
     # one copy of a vertex per label that uses it, numbered as met
     last = np.full(n_vertices, -1, dtype=np.int64)
     copy = np.empty(n_vertices, dtype=np.int64)
