@@ -78,9 +78,11 @@ from .refine import (
     MAX_STRETCH_INCREASE,
     SMALL_CHART_FACES,
     _gradient_coefficients,
-    number_marked,
+    gradient_row,
+    gradient_transpose,
     slim_refine,
 )
+from .topology import boundary_half_edges, boundary_pieces
 
 log = logging.getLogger(__name__)
 
@@ -861,7 +863,7 @@ def _hessian_matrix(V, F, tangent, min_points, min_rcond, room=None):
     ``room``; all False without it, where a starved vertex raises InvalidMeshError)."""
     extra = np.zeros(len(V), dtype=np.int64)
     on_boundary = np.zeros(len(V), dtype=bool)
-    on_boundary[_boundary_half_edges(F, len(V)).ravel()] = True  # as mesh.boundary_edges
+    on_boundary[boundary_half_edges(F, len(V)).ravel()] = True  # as mesh.boundary_edges
     check = None  # vertices whose neighbourhood changed: all of them at first
     A = vertex_adjacency(F, len(V))
     nbr = dict(min_points=min_points, adjacency=A, room=room)
@@ -1589,7 +1591,7 @@ def charts_quality(
     )
     flipped = (sa < 0) & ~degenerate
 
-    B = _boundary_half_edges(F, n)
+    B = boundary_half_edges(F, n)
     interior_bad, boundary_bad, _ = angle_sum_violations(uv, F, n, boundary=B)
 
     out = {
@@ -1686,14 +1688,14 @@ def _charts_loops_oriented(
 ) -> np.ndarray:
     """Per chart: its largest uv boundary loop counter-clockwise, all others clockwise.
 
-    Loops are the pieces of the boundary graph (:func:`_boundary_pieces`); a loop's signed area
-    is the shoelace sum over its directed edges, in any order (needs a manifold boundary, as
-    :func:`segparam.mesh.boundary_loops` does).
+    Loops are the pieces of the boundary graph (:func:`segparam.topology.boundary_pieces`); a
+    loop's signed area is the shoelace sum over its directed edges, in any order (needs a
+    manifold boundary, as :func:`segparam.mesh.boundary_loops` does).
     """
     out = np.zeros(n_charts, dtype=bool)
     if len(B) == 0:
         return out
-    verts, idx, n_loops, loop = _boundary_pieces(B, len(uv))
+    verts, idx, n_loops, loop = boundary_pieces(B, len(uv))
     p, q = uv[B[:, 0]], uv[B[:, 1]]
     area = 0.5 * np.bincount(
         loop[idx[:, 0]], weights=p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0], minlength=n_loops
@@ -1708,88 +1710,6 @@ def _charts_loops_oriented(
     bad = np.bincount(loop_chart, weights=wrong, minlength=n_charts)
     has = np.bincount(loop_chart, minlength=n_charts) > 0
     return has & (bad == 0)
-
-
-@njit(cache=True, nogil=True)
-def _boundary_half_edges(F, n):  # pragma: no cover - compiled
-    """:func:`segparam.mesh.boundary_edges` of faces ``F`` on ``n`` vertices: the half-edges
-    ``F[f, k] -> F[f, k + 1]`` whose edge no other half-edge has, in half-edge order ``3 f + k``.
-    Each edge is found among the edges of its lower vertex (a few), with no sort of the mesh's
-    edges (``charts_quality`` measures each batch of charts two to six times)."""
-    m = len(F)
-    ptr = np.zeros(n + 1, dtype=np.int64)
-    for f in range(m):
-        for k in range(3):
-            ptr[min(F[f, k], F[f, (k + 1) % 3]) + 1] += 1
-    for v in range(n):
-        ptr[v + 1] += ptr[v]
-    upper = np.empty(3 * m, dtype=np.int64)
-    fill = ptr[:-1].copy()
-    for f in range(m):
-        for k in range(3):
-            a, b = F[f, k], F[f, (k + 1) % 3]
-            lo = min(a, b)
-            upper[fill[lo]] = max(a, b)
-            fill[lo] += 1
-    single = np.zeros(3 * m, dtype=np.bool_)
-    count = 0
-    for f in range(m):
-        for k in range(3):
-            a, b = F[f, k], F[f, (k + 1) % 3]
-            lo, hi = min(a, b), max(a, b)
-            seen = 0
-            for p in range(ptr[lo], ptr[lo + 1]):
-                seen += upper[p] == hi
-            if seen == 1:
-                single[3 * f + k] = True
-                count += 1
-    B = np.empty((count, 2), dtype=np.int64)
-    e = 0
-    for h in range(3 * m):
-        if single[h]:
-            f, k = h // 3, h % 3
-            B[e, 0], B[e, 1] = F[f, k], F[f, (k + 1) % 3]
-            e += 1
-    return B
-
-
-@njit(cache=True, nogil=True)
-def _boundary_pieces(B, n):  # pragma: no cover - compiled
-    """:func:`segparam.mesh.boundary_pieces` of half-edges ``B`` on ``n`` vertices, compiled
-    (union-find): the boundary vertices (ascending), ``B`` in their positions, the number of
-    pieces and each vertex's piece, pieces numbered by their lowest vertex as scipy's
-    connected components number them."""
-    pos = np.full(n, -1, dtype=np.int64)
-    for e in range(len(B)):
-        pos[B[e, 0]] = 0
-        pos[B[e, 1]] = 0
-    verts = number_marked(pos)
-    nb = len(verts)
-    idx = np.empty((len(B), 2), dtype=np.int64)
-    parent = np.arange(nb)
-    for e in range(len(B)):
-        a, b = pos[B[e, 0]], pos[B[e, 1]]
-        idx[e, 0], idx[e, 1] = a, b
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        while parent[b] != b:
-            parent[b] = parent[parent[b]]
-            b = parent[b]
-        if a != b:
-            parent[max(a, b)] = min(a, b)
-    label = np.full(nb, -1, dtype=np.int64)
-    piece = np.empty(nb, dtype=np.int64)
-    n_pieces = 0
-    for v in range(nb):
-        r = v
-        while parent[r] != r:
-            r = parent[r]
-        if label[r] < 0:
-            label[r] = n_pieces
-            n_pieces += 1
-        piece[v] = label[r]
-    return verts, idx, n_pieces, piece
 
 
 def _charts_distortion(
@@ -1939,6 +1859,7 @@ def _arap_charts(
     frames = inverse_frames(triangle_frames(V, F)) if inv_frames is None else inv_frames
     D = _gradient_operator(V, F, frames)
     coef = _gradient_coefficients(frames)  # D's rows, per face
+    all_faces = np.arange(len(F))
     area = face_areas(V, F)
     w = np.repeat(area, 2)
     w_total = _chart_sum(face_chart, area, n_charts)
@@ -1967,34 +1888,12 @@ def _arap_charts(
             DT = D.T  # once: a transpose is a new matrix object each time
             L = (DT @ sp.diags(w) @ D).tocsc()
             solve = spd_solver(L[free][:, free])
-        rhs = _arap_rhs(F, coef, Rt, area, len(V))
+        rhs = gradient_transpose(F, all_faces, coef, area[:, None, None] * Rt, len(V))
         new = np.zeros_like(uv)
         new[free] = solve(rhs[free])
         move = active[vert_chart]
         uv[move] = new[move]
     return uv, steps
-
-
-@njit(cache=True, nogil=True)
-def _sorted_corners(F, t, coef, k):  # pragma: no cover - compiled
-    """Face ``t``'s distinct corners in ascending vertex order and row ``k`` of its gradient
-    coefficients summed per corner: the entries of row ``2 t + k`` of :func:`_gradient_operator`
-    as the CSR matrix stores them (columns sorted, a vertex named twice summed)."""
-    v0, v1, v2 = F[t, 0], F[t, 1], F[t, 2]
-    c0, c1, c2 = coef[t, k, 0], coef[t, k, 1], coef[t, k, 2]
-    if v1 < v0:
-        v0, v1, c0, c1 = v1, v0, c1, c0
-    if v2 < v1:
-        v1, v2, c1, c2 = v2, v1, c2, c1
-        if v1 < v0:
-            v0, v1, c0, c1 = v1, v0, c1, c0
-    if v0 == v1 == v2:
-        return 1, v0, v0, v0, c0 + c1 + c2, 0.0, 0.0
-    if v0 == v1:
-        return 2, v0, v2, v2, c0 + c1, c2, 0.0
-    if v1 == v2:
-        return 2, v0, v1, v1, c0, c1 + c2, 0.0
-    return 3, v0, v1, v2, c0, c1, c2
 
 
 @njit(cache=True, nogil=True)
@@ -2005,9 +1904,9 @@ def _arap_local(F, coef, uv, area, face_chart, n_charts):  # pragma: no cover - 
     triangle is flipped (``det G <= 0``).
 
     The arithmetic of the sparse and array forms it replaced, term by term: ``D @ uv`` row by
-    row over the sorted columns from 0.0 (scipy's CSR product), ``(p, q) / hypot(p, q)``, each
-    face's four squares summed in order and scaled by its area, the faces summed per chart in
-    order (``np.bincount``): the same bits.
+    row over the sorted columns from 0.0 (scipy's CSR product, ``refine.gradient_row``),
+    ``(p, q) / hypot(p, q)``, each face's four squares summed in order and scaled by its area, the
+    faces summed per chart in order (``np.bincount``): the same bits.
     """
     m = len(F)
     Rt = np.empty((m, 2, 2))
@@ -2016,7 +1915,7 @@ def _arap_local(F, coef, uv, area, face_chart, n_charts):  # pragma: no cover - 
     G = np.empty((2, 2))
     for t in range(m):
         for k in range(2):
-            n_c, v0, v1, v2, a0, a1, a2 = _sorted_corners(F, t, coef, k)
+            n_c, v0, v1, v2, a0, a1, a2 = gradient_row(F, t, coef, k)
             for c in range(2):
                 acc = 0.0 + a0 * uv[v0, c]
                 if n_c > 1:
@@ -2037,24 +1936,6 @@ def _arap_local(F, coef, uv, area, face_chart, n_charts):  # pragma: no cover - 
         if G[0, 0] * G[1, 1] - G[0, 1] * G[1, 0] <= 0:
             flipped[face_chart[t]] = True
     return Rt, energy, flipped
-
-
-@njit(cache=True, nogil=True)
-def _arap_rhs(F, coef, Rt, area, n):  # pragma: no cover - compiled
-    """ARAP's global step's right-hand side ``D^T (w R^T)`` (``w``: each face's area, twice),
-    as scipy's CSC product sums it: each vertex from 0.0, face row after face row."""
-    out = np.zeros((n, 2))
-    for t in range(len(F)):
-        for k in range(2):
-            n_c, v0, v1, v2, a0, a1, a2 = _sorted_corners(F, t, coef, k)
-            for c in range(2):
-                x = area[t] * Rt[t, k, c]
-                out[v0, c] += a0 * x
-                if n_c > 1:
-                    out[v1, c] += a1 * x
-                if n_c > 2:
-                    out[v2, c] += a2 * x
-    return out
 
 
 @dataclass(frozen=True)

@@ -46,6 +46,7 @@ from numba import njit
 from .linalg import FixedPattern
 from .mesh import face_areas
 from .quality import inverse_frames, jacobians, triangle_frames
+from .topology import number_marked
 
 __all__ = [
     "ANGLE_WEIGHT",
@@ -249,31 +250,50 @@ def _step_bounds(x, d, F, faces, fc, n_charts):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _energy_gradient(F, faces, g, coef, n):  # pragma: no cover - compiled
-    """The energy's gradient over the stacked vertex values ``(u, v)`` (``2 n``) from the
-    per-face ``d/dJ`` of ``faces`` (``g``, :func:`_slim_terms`): row ``i`` of face ``f``'s
-    ``d/dJ`` spread over its corners by the gradient coefficients ``coef[f]``
-    (:func:`_gradient_coefficients`), ``D^T`` applied to it without the sparse matrix.
+def gradient_row(F, t, coef, k):  # pragma: no cover - compiled
+    """Face ``t``'s distinct corners in ascending vertex order and row ``k`` of its gradient
+    coefficients (:func:`_gradient_coefficients`) summed per corner: the entries of row
+    ``2 t + k`` of the gradient operator ``D`` as a CSR matrix stores them (columns sorted, a
+    vertex named twice summed; :func:`segparam.parameterize._gradient_operator`)."""
+    v0, v1, v2 = F[t, 0], F[t, 1], F[t, 2]
+    c0, c1, c2 = coef[t, k, 0], coef[t, k, 1], coef[t, k, 2]
+    if v1 < v0:
+        v0, v1, c0, c1 = v1, v0, c1, c0
+    if v2 < v1:
+        v1, v2, c1, c2 = v2, v1, c2, c1
+        if v1 < v0:
+            v0, v1, c0, c1 = v1, v0, c1, c0
+    if v0 == v1 == v2:
+        return 1, v0, v0, v0, c0 + c1 + c2, 0.0, 0.0
+    if v0 == v1:
+        return 2, v0, v2, v2, c0 + c1, c2, 0.0
+    if v1 == v2:
+        return 2, v0, v1, v1, c0, c1 + c2, 0.0
+    return 3, v0, v1, v2, c0, c1, c2
 
-    The same bits as ``D^T @ g`` with scipy's CSC product: each vertex sums its terms from 0.0
-    face row after face row (``2 f + k``), and a face that names a vertex twice adds the sum of
-    that vertex's coefficients once, as the matrix sums duplicate entries.
+
+@njit(cache=True, nogil=True)
+def gradient_transpose(F, faces, coef, x, n):  # pragma: no cover - compiled
+    """``D^T x`` for per-face rows ``x`` of the faces ``faces`` (``(k, 2, 2)``: face ``faces[t]``'s
+    row ``k`` of ``D``, value ``c`` of the two uv coordinates), the other faces' rows 0: an
+    ``(n, 2)`` array over the vertices, without the sparse matrix.
+
+    The same bits as scipy's CSC product ``D.T @ x``: each vertex sums its terms from 0.0 face
+    row after face row (``2 f + k``), a face naming a vertex twice adding its summed
+    coefficients once (:func:`gradient_row`). SLIM's energy gradient and ARAP's right-hand side
+    (:func:`segparam.parameterize._arap_charts`).
     """
-    out = np.zeros(2 * n)
+    out = np.zeros((n, 2))
     for t in range(len(faces)):
         f = faces[t]
-        for i in range(2):
-            for k in range(2):
-                x = g[t, i, k]
-                for j in range(3):
-                    v = F[f, j]
-                    if (j > 0 and F[f, 0] == v) or (j > 1 and F[f, 1] == v):
-                        continue  # added with the corner that named it first
-                    c = coef[f, k, j]
-                    for jj in range(j + 1, 3):
-                        if F[f, jj] == v:
-                            c += coef[f, k, jj]
-                    out[i * n + v] += c * x
+        for k in range(2):
+            n_c, v0, v1, v2, a0, a1, a2 = gradient_row(F, f, coef, k)
+            for c in range(2):
+                out[v0, c] += a0 * x[t, k, c]
+                if n_c > 1:
+                    out[v1, c] += a1 * x[t, k, c]
+                if n_c > 2:
+                    out[v2, c] += a2 * x[t, k, c]
     return out
 
 
@@ -373,7 +393,9 @@ def slim_refine(
             break
         faces = np.flatnonzero(active[fc])
         W2, g = _slim_terms(F, faces, uv, frames, weight, area)
-        grad = _energy_gradient(F, faces, g, g3, n)
+        # g[t, c, k]: coordinate c's d/dJ in column k, i.e. row k of D for coordinate c
+        grad = gradient_transpose(F, faces, g3, np.ascontiguousarray(g.transpose(0, 2, 1)), n)
+        grad = grad.T.ravel()  # (u, v) stacked
         move = active[vc] & ~pin
         if system is None or move.sum() < SYSTEM_REUSE * system.size:
             system = _ProxySystem(F, faces, n, stiffness)
@@ -411,23 +433,6 @@ def slim_refine(
 #: Below it the system is rebuilt over the moving charts only, so a long tail of iterations on
 #: a few charts does not refactorize the whole batch.
 SYSTEM_REUSE = 0.5
-
-
-@njit(cache=True, nogil=True)
-def number_marked(index):  # pragma: no cover - compiled
-    """Number the entries of ``index`` marked 0 (the others are -1) 0, 1, 2, ... in ascending
-    order, in place, and return the marked positions in that order (the numbering's inverse):
-    the vertices a set of faces or edges uses, compactly."""
-    m = 0
-    for v in range(len(index)):
-        if index[v] == 0:
-            index[v] = m
-            m += 1
-    marked = np.empty(m, dtype=np.int64)
-    for v in range(len(index)):
-        if index[v] >= 0:
-            marked[index[v]] = v
-    return marked
 
 
 @njit(cache=True, nogil=True)

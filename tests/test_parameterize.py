@@ -445,8 +445,10 @@ def test_the_compiled_boundary_topology_is_the_sorted_one(seed):
     jittered until their boundaries cross many times, of charts with holes and pinched
     boundaries (two loops through one vertex)."""
     from segparam.mesh import boundary_edges, boundary_pieces
-    from segparam.parameterize import _boundary_half_edges, _boundary_pieces, _charts_crossings
+    from segparam.parameterize import _charts_crossings
     from segparam.quality import boundary_crossings
+    from segparam.topology import boundary_half_edges as compiled_edges
+    from segparam.topology import boundary_pieces as compiled_pieces
 
     rng = np.random.default_rng(seed)
     parts = []
@@ -457,9 +459,9 @@ def test_the_compiled_boundary_topology_is_the_sorted_one(seed):
         parts.append((V[used], F.reshape(-1, 3)))
     Vu, Fu, vert_chart = _union(parts)
     n = len(Vu)
-    B = _boundary_half_edges(Fu, n)
+    B = compiled_edges(Fu, n)
     np.testing.assert_array_equal(B, boundary_edges(Fu))
-    for got, want in zip(_boundary_pieces(B, n), boundary_pieces(B), strict=True):
+    for got, want in zip(compiled_pieces(B, n), boundary_pieces(B), strict=True):
         np.testing.assert_array_equal(got, want)
     uv = Vu[:, :2] + rng.normal(scale=0.05 * (seed % 4), size=(n, 2))
     chart = vert_chart[B[:, 0]]
@@ -489,18 +491,17 @@ def test_the_compiled_segment_test_is_the_array_one():
 
 @pytest.mark.parametrize("seed", range(6))
 def test_the_compiled_arap_steps_are_the_sparse_ones_bit_for_bit(seed):
-    """ARAP's local step and right-hand side (``_arap_local``, ``_arap_rhs``, compiled) against
+    """ARAP's local step and right-hand side (``_arap_local``, ``gradient_transpose``) against
     the sparse and array forms they replaced, to the last bit: ``G = D uv``, the closest
     rotations, each chart's area-weighted energy and flip flag, ``D^T (w R^T)``; faces naming a
     vertex twice included (the matrix sums such entries)."""
     from segparam.parameterize import (
         _arap_local,
-        _arap_rhs,
         _chart_sum,
         _gradient_operator,
     )
     from segparam.quality import inverse_frames, triangle_frames
-    from segparam.refine import _gradient_coefficients
+    from segparam.refine import _gradient_coefficients, gradient_transpose
 
     rng = np.random.default_rng(seed)
     n, m, n_charts = 30, 80, 3
@@ -529,7 +530,8 @@ def test_the_compiled_arap_steps_are_the_sparse_ones_bit_for_bit(seed):
     assert got_Rt.tobytes() == Rt.tobytes() and got_energy.tobytes() == energy.tobytes()
     np.testing.assert_array_equal(got_flipped, flipped)
     rhs = D.T @ (np.repeat(area, 2)[:, None] * Rt.reshape(-1, 2))
-    assert _arap_rhs(F, coef, Rt, area, n).tobytes() == rhs.tobytes()
+    got_rhs = gradient_transpose(F, np.arange(m), coef, area[:, None, None] * Rt, n)
+    assert got_rhs.tobytes() == rhs.tobytes()
 
 
 def test_isometric_fit_undoes_a_stretch_by_hand():

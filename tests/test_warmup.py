@@ -108,11 +108,11 @@ import json, sys
 sys.path.insert(0, {tests!r})
 import numpy as np
 from meshes import saddle, spherical_cap
-from segparam import parameterize, refine
+from segparam import parameterize, refine, topology
 from segparam.parameterize import solve_charts
 kernels = [refine._slim_terms, refine._chart_energies, refine._step_bounds,
-           refine._energy_gradient, refine.proxy_layout, parameterize._arap_local,
-           parameterize._arap_rhs, parameterize._boundary_pieces, parameterize._sweep_crossings]
+           refine.gradient_transpose, refine.proxy_layout, parameterize._arap_local,
+           topology.boundary_half_edges, topology.boundary_pieces, parameterize._sweep_crossings]
 parts = [spherical_cap(8, 8), saddle(8)]
 V = np.vstack([p[0] for p in parts])
 F = np.vstack([parts[0][1], parts[1][1] + len(parts[0][0])])
