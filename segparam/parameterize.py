@@ -527,7 +527,11 @@ def _cholesky_screen(V, ptr, idx, b1, b2, min_rcond, rows, Gs):  # pragma: no co
                 for b in range(j + 1, 6):
                     H[a, b] -= H[a, j] * H[b, j]
         if not definite:
-            Gs[n_unsure] = G
+            # element by element: an array assigned to a slice (``Gs[n] = G``) made numba
+            # compile its shape-mismatch message (string formatting, ~3 s on a first run)
+            for r in range(6):
+                for q in range(6):
+                    Gs[n_unsure, r, q] = G[r, q]
             unsure[n_unsure] = t
             n_unsure += 1
     return unsure[:n_unsure]

@@ -217,7 +217,10 @@ def render_view(
     ``normals`` (m, 3), the unit face normals, may be passed when rendering several views.
     """
     size = camera.size
-    F = np.ascontiguousarray(F, dtype=np.int64)
+    # read-only, whatever the caller's: an atlas's faces are, and a writable array would make
+    # numba compile the kernel a second time (0.6-1.8 s on a first run) for that flag alone
+    F = np.ascontiguousarray(F, dtype=np.int64).view()
+    F.flags.writeable = False
     S = np.ascontiguousarray(camera.project(V))
     T = np.ascontiguousarray(np.asarray(uv, dtype=np.float64)[np.asarray(face_uv, dtype=np.int64)])
     if shade:

@@ -1,17 +1,17 @@
 """The packer's kernels compiled in the background on the first run after installing.
 
 numba compiles every kernel the first time a process calls it and keeps the machine code in its
-on-disk cache (``cache=True``), so only the first run after installing pays: 27-30 s of the
-README's quick start, 16 s of it the packer's trial kernel (`segparam.canvas.trial`), which the
-pipeline calls only at its last stage. When that kernel is not in the cache yet,
+on-disk cache (``cache=True``), so only the first run after installing pays: about 25 s of the
+README's quick start, 11-16 s of it the packer's trial kernel (`segparam.canvas.trial`), which
+the pipeline calls only at its last stage. When that kernel is not in the cache yet,
 :func:`segparam.pipeline.build_atlas` starts one process that compiles it (it packs two
-triangles, :func:`_compile`) while this one cleans, segments and parameterizes on the other
-core; before packing it waits for that process (:func:`stop`, which meanwhile compiles the
-preview renderer's kernel here) and then loads the kernel from the cache. The quick start's first
-run: 34 -> about 20 s (BENCHMARKS.md, section 12). Later runs find the kernel cached and start
-nothing. The process first compiles the solver's refinement and quality kernels
-(:func:`_compile_refinement`), which this one needs only 10-20 s into a first run: a first
-``build_atlas`` of the sample brain 34-35 -> 32-34 s (section 0.1, session 17).
+triangles, :func:`_compile`), then the preview renderer's kernel, while this one cleans,
+segments and parameterizes on the other core, compiling the solver's kernels as it needs them;
+before packing it waits for that process (:func:`stop`, which meanwhile compiles the preview
+renderer's kernel here if the process has not got to it) and then loads the kernels from the
+cache. Later runs find the trial kernel cached and start nothing. The split of the work between
+the two processes is measured (BENCHMARKS.md, sections 12 and 0.1, session 18): the background
+process has the longer share even so.
 
 If the process fails (or the cache cannot be written), the pack stage compiles the kernel
 itself, as it would without this module.
@@ -113,44 +113,16 @@ def _compile_preview() -> None:
 
 
 def _compile() -> None:
-    """In the background process: the solver's refinement and quality kernels first
-    (:func:`_compile_refinement`), then pack two triangles, which compiles the trial kernel (and
-    the kernels it calls) with the argument types the pipeline uses, into numba's cache. Ctrl-C
-    is the caller's to handle (it ends this process)."""
+    """In the background process: pack two triangles, which compiles the trial kernel (and the
+    kernels it calls) with the argument types the pipeline uses, into numba's cache; then the
+    preview renderer's kernel (:func:`_compile_preview`), the next one an atlas with pictures
+    needs. Ctrl-C is the caller's to handle (it ends this process)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     import numpy as np
 
     from .pack import pack_charts
 
-    _compile_refinement()
-
     uv = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
     tri = np.array([[0, 1, 2]])
     pack_charts([uv, uv], [tri, tri], [0.5, 0.5])
-
-
-def _compile_refinement() -> None:
-    """Refine and measure a map of a 4 x 4 bent grid as the solver's batches do (ARAP, SLIM,
-    ``charts_quality``): their kernels land in numba's cache with the pipeline's argument types
-    before the main process needs them. That is 10-20 s into a first run, after the
-    segmentation's and the Hessian's kernels, which the main process compiles meanwhile; the
-    packer's kernels are needed last. A head start only: where it fails or comes late, the main
-    process compiles them itself."""
-    import numpy as np
-
-    from .parameterize import _arap_charts, charts_quality
-    from .quality import inverse_frames, triangle_frames
-    from .refine import slim_refine
-
-    u, v = np.meshgrid(np.linspace(0.0, 1.0, 4), np.linspace(0.0, 1.0, 4))
-    V = np.stack([u.ravel(), v.ravel(), 0.3 * (u * v).ravel()], axis=1)
-    q = (np.arange(3)[:, None] * 4 + np.arange(3)[None, :]).ravel()  # lower-left corners
-    F = np.concatenate([np.stack([q, q + 1, q + 5], 1), np.stack([q, q + 5, q + 4], 1)])
-    vert_chart = np.zeros(len(V), dtype=np.int64)
-    frames = inverse_frames(triangle_frames(V, F))
-    try:
-        uv, _ = _arap_charts(V, F, V[:, :2] * [1.0, 0.9], vert_chart, np.zeros(1, np.int64), 1)
-        charts_quality(V, F, uv, vert_chart, 1, frames)
-        slim_refine(V, F, uv, vert_chart=vert_chart, n_charts=1, inv_frames=frames)
-    except Exception as exc:  # the main process compiles what is missing
-        log.debug("refinement kernels not compiled ahead (%r)", exc)
+    _compile_preview()

@@ -288,3 +288,15 @@ def test_hulls_are_qhulls_counter_clockwise_from_the_lowest_leftmost_point() -> 
         a, b = np.roll(got, -1, 0) - got, np.roll(got, -2, 0) - np.roll(got, -1, 0)
         turns = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
         assert (turns > 0).all()  # counter-clockwise, strictly convex
+
+
+def test_stable_order_is_a_stable_argsort():
+    """The orientations' scan order (``_stable_order``) is numpy's stable argsort of the first n
+    keys, ties in index order."""
+    rng = np.random.default_rng(3)
+    for n in (0, 1, 2, 7, 40, 96):
+        for _ in range(20):
+            keys = rng.integers(0, 6, size=100) * 0.5  # many ties
+            assert np.array_equal(
+                canvas._stable_order(keys, n), np.argsort(keys[:n], kind="mergesort")
+            )

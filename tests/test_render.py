@@ -131,3 +131,18 @@ def test_preview_layout():
     assert render_preview(
         SQUARE_V, SQUARE_F, SQUARE_UV, SQUARE_F, views=[(0, 0)] * 3, size=32
     ).shape == (32, 96, 3)
+
+
+def test_one_compiled_renderer_for_writable_and_read_only_faces():
+    """The kernel sees the faces read-only whatever the caller passes (an atlas's are), so a
+    writable array does not compile a second copy of it; the picture is the same."""
+    from segparam import render
+
+    cam = camera_for(SQUARE_V, 20.0, 10.0, 32)
+    tex = checker()
+    frozen = SQUARE_F.copy()
+    frozen.flags.writeable = False
+    a = render_view(SQUARE_V, SQUARE_F.copy(), SQUARE_UV, SQUARE_F, tex, cam)
+    b = render_view(SQUARE_V, frozen, SQUARE_UV, SQUARE_F, tex, cam)
+    assert np.array_equal(a, b)
+    assert len(render._render_kernel.signatures) == 1
