@@ -188,7 +188,7 @@ def label_counts(F, labels, order, start, n_vertices):  # pragma: no cover - com
     copy = np.empty(n_vertices, dtype=np.int64)
     local = np.empty((m, 3), dtype=np.int64)
     vlabel = np.empty(3 * m, dtype=np.int64)
-    n_v = 0
+    n_v = np.int64(0)  # not a literal 0 (see canvas.new_canvas): passed to half_edge_edges
     for p in range(m):
         f = order[p]
         lab = labels[f]
