@@ -10,7 +10,7 @@ segments and parameterizes on the other core, compiling the solver's kernels as 
 before packing it waits for that process (:func:`stop`, which meanwhile compiles the preview
 renderer's kernel here if the process has not got to it) and then loads the kernels from the
 cache. Later runs find the trial kernel cached and start nothing. The split of the work between
-the two processes is measured (BENCHMARKS.md, sections 12 and 0.1, session 18): the background
+the two processes is measured (BENCHMARKS.md, section 12, session 18): the background
 process has the longer share even so.
 
 If the process fails (or the cache cannot be written), the pack stage compiles the kernel
