@@ -492,6 +492,27 @@ def test_many_charts_start_the_scale_search_near_its_answer(monkeypatch) -> None
     assert pack._first_scale(few, 1024, 2, by_area, by_side) == pack._FIRST_GUESS * by_area
 
 
+def test_after_a_failed_trial_many_charts_aim_at_the_full_window() -> None:
+    """Before any layout fitted, a failed raster trial's secant step is aimed at ``_AIM`` of the
+    texture's side (the middle of the "full" stop's window) with ``_MODEL_CHARTS`` charts or
+    more, just under the failed scale at most; with fewer charts it stays 3% under it."""
+    from segparam import pack
+
+    G, p, s = 1024, 2, 64.0
+    need = 1034  # the height the failed trial needed, border included
+    aimed = pack._next_scale(s, 0.0, s, False, 1.0, need, G, p, many=True)
+    assert aimed == pytest.approx(s * np.sqrt(pack._AIM * (G - 2 * p) / (need - 2 * p)))
+    assert pack._UNDER_FAILED * s < aimed < s
+    assert pack._next_scale(s, 0.0, s, False, 1.0, need, G, p) == pytest.approx(
+        pack._UNDER_FAILED * s
+    )
+    # a failure by a hair: the aimed step still moves down, by half the scale tolerance
+    close = pack._next_scale(s, 0.0, s, False, 1.0, G + 1, G, p, many=True)
+    assert close == pytest.approx(s / (1 + pack._SCALE_TOL / 2))
+    # a rectangle trial reports no height: the fraction rule as before (placed 81% of the area)
+    assert pack._next_scale(s, 0.0, s, False, 0.81, None, G, p, many=True) == pytest.approx(0.9 * s)
+
+
 def test_long_thin_chart_and_wildly_different_areas() -> None:
     strip, Fs = grid(200, 1)
     big, Fb = disc()
