@@ -1158,6 +1158,21 @@ def _tubes(V: np.ndarray, F: np.ndarray, face_chart: np.ndarray, n_charts: int) 
     return (loops >= 2) & (turned == 0)
 
 
+def _piece_vertex_counts(sub: _Submeshes, srcs: list[int], faces: list[np.ndarray]) -> np.ndarray:
+    """How many vertices each piece uses: piece ``k`` is the faces ``faces[k]`` (chart-local
+    indices) of chart ``srcs[k]``. One ``np.unique`` of the pieces' corners, each piece's vertex
+    numbers offset past the ones before, instead of one per piece (the 600 sphere halves' round:
+    1,200 calls)."""
+    srcs_a = np.asarray(srcs, dtype=np.int64)
+    sizes = np.array([len(f) for f in faces])
+    rows = np.concatenate(faces) + np.repeat(sub.bounds[srcs_a], sizes)  # rows of sub.local_F
+    n_vertices = sub.vptr[srcs_a + 1] - sub.vptr[srcs_a]
+    offset = np.r_[0, np.cumsum(n_vertices)[:-1]]
+    distinct = np.unique(sub.local_F[rows] + np.repeat(offset, sizes)[:, None])
+    piece = np.searchsorted(offset, distinct, side="right") - 1
+    return np.bincount(piece, minlength=len(srcs))
+
+
 def _solve_in_rounds(
     V: np.ndarray,
     F: np.ndarray,
@@ -1200,7 +1215,9 @@ def _solve_in_rounds(
     open_pieces = dict.fromkeys(rest, 1)
     dropped: set = set()
     while pending:
-        nverts = [len(np.unique(sub.of(src)[1][faces])) for src, faces, *_ in pending]
+        nverts = _piece_vertex_counts(
+            sub, [src for src, *_ in pending], [f for _, f, *_ in pending]
+        )
         batch = [
             k for k, (_, _, depth, _, tried) in enumerate(pending)
             if depth > 0 and not tried and nverts[k] <= BATCH_MAX_VERTICES

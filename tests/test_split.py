@@ -410,3 +410,24 @@ def test_the_gain_pass_skips_only_bisections_that_fail_anyway(monkeypatch):
     assert a.n_charts == b.n_charts
     np.testing.assert_array_equal(a.uv_F, b.uv_F)
     np.testing.assert_array_equal(a.uv, b.uv)
+
+
+def test_piece_vertex_counts_match_one_unique_per_piece():
+    """The split rounds' vertex count of every piece, all at once, is what ``np.unique`` of each
+    piece's corners gives (charts of a grid cut in random labels, random subsets of them)."""
+    from segparam.split import _piece_vertex_counts, _submeshes
+
+    _, F = tri_grid(12, 9)
+    rng = np.random.default_rng(5)
+    labels = rng.integers(0, 7, len(F))
+    order = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[order], np.arange(8))
+    sub = _submeshes(F, labels, order, bounds)
+    srcs, pieces = [], []
+    for _ in range(40):
+        src = int(rng.integers(0, 7))
+        n = bounds[src + 1] - bounds[src]
+        srcs.append(src)
+        pieces.append(np.sort(rng.choice(n, int(rng.integers(1, n + 1)), replace=False)))
+    want = [len(np.unique(sub.of(s)[1][f])) for s, f in zip(srcs, pieces, strict=True)]
+    assert _piece_vertex_counts(sub, srcs, pieces).tolist() == want
