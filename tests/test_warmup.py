@@ -105,21 +105,23 @@ def test_a_cold_cache_gets_the_packer_compiled_in_the_background(tmp_path):
 
 BACKGROUND = """
 import json
-from segparam import render, warmup
-cached = {"trial": warmup.kernels_cached(), "preview": warmup._cached(render._render_kernel)}
+from segparam import pack, render, warmup
+cached = {"trial": warmup.kernels_cached(), "preview": warmup._cached(render._render_kernel),
+          "hulls": warmup._cached(pack._hulls)}
 print(json.dumps(cached))
 """
 
 
 @pytest.mark.slow
 def test_the_background_compiles_the_packer_then_the_preview_renderer(tmp_path):
-    """The background process (``warmup._compile``) leaves the packer's trial kernel and the
-    preview renderer's kernel in an empty cache. Compiles the packer's kernels: about 15 s."""
-    assert _run(BACKGROUND, tmp_path) == {"trial": False, "preview": False}
+    """The background process (``warmup._compile``) leaves the packer's trial and hull kernels
+    and the preview renderer's kernel in an empty cache. Compiles the packer's kernels: about
+    15 s."""
+    assert _run(BACKGROUND, tmp_path) == {"trial": False, "preview": False, "hulls": False}
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
     code = "import segparam.warmup as w; w._compile()"
     subprocess.run([sys.executable, "-c", code], check=True, env=env, cwd=tmp_path)
-    assert _run(BACKGROUND, tmp_path) == {"trial": True, "preview": True}
+    assert _run(BACKGROUND, tmp_path) == {"trial": True, "preview": True, "hulls": True}
 
 
 PREVIEW = """
