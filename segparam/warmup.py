@@ -4,14 +4,14 @@ numba compiles every kernel the first time a process calls it and keeps the mach
 on-disk cache (``cache=True``), so only the first run after installing pays: about 25 s of the
 README's quick start, 11-16 s of it the packer's trial kernel (`segparam.canvas.trial`), which
 the pipeline calls only at its last stage. When that kernel is not in the cache yet,
-:func:`segparam.pipeline.build_atlas` starts one process that compiles it (it packs two
-triangles, :func:`_compile`), then the preview renderer's kernel, while this one cleans,
+:func:`segparam.pipeline.build_atlas` starts one process that compiles it (it packs a few
+small charts, :func:`_compile`), then the preview renderer's kernel, while this one cleans,
 segments and parameterizes on the other core, compiling the solver's kernels as it needs them;
 before packing it waits for that process (:func:`stop`, which meanwhile compiles the preview
 renderer's kernel here if the process has not got to it) and then loads the kernels from the
 cache. Later runs find the trial kernel cached and start nothing. The split of the work between
-the two processes is measured (BENCHMARKS.md, section 12, session 18): the background
-process has the longer share even so.
+the two processes is measured (BENCHMARKS.md, section 12, session 18): this process now has
+the longer share, and giving the background more of it did not pay.
 
 If the process fails (or the cache cannot be written), the pack stage compiles the kernel
 itself, as it would without this module.
@@ -116,9 +116,9 @@ def _compile() -> None:
     """In the background process: pack two triangles and a 16-triangle fan, which compiles the
     trial kernel (and the kernels it calls) and the hull of a chart over 12 uv points
     (`pack._hulls`, else the main process's last compile, ~0.5-0.7 s at the pack stage) with the
-    argument types the pipeline uses, into numba's cache; then the
-    preview renderer's kernel (:func:`_compile_preview`), the next one an atlas with pictures
-    needs. Ctrl-C is the caller's to handle (it ends this process)."""
+    argument types the pipeline uses, into numba's cache; then the preview renderer's kernel
+    (:func:`_compile_preview`), the next one an atlas with pictures needs. Ctrl-C is the
+    caller's to handle (it ends this process)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     import numpy as np
 
