@@ -148,10 +148,13 @@ _FULL = 0.006
 _SMOOTH_CHARTS = 100
 # - with fewer charts, a fit that fills the texture before any trial failed is followed by a
 #   trial this much larger instead of the bisection towards the area bound, which no layout
-#   reaches: the CAD plate's 18 charts fill the texture at the first guess, and its search went
-#   6 -> 4 trials to the same layout (0.14 -> 0.09 s); no other of 18 chart sets changed
-#   (BENCHMARKS.md, section 0.1, session 12);
-_FULL_STEP = 2 * _SCALE_TOL
+#   reaches: the CAD plate's charts fill the texture at the first guess, and its search went
+#   6 -> 4 trials to the same layout (0.14 -> 0.09 s; session 12). The step is just inside
+#   `_SCALE_TOL`, so that a failure there ends the search at once: at twice `_SCALE_TOL` (until
+#   session 19) the plate's 12 charts failed at +1.2%, +0.6% and +0.3%, 4 trials for the first
+#   fit's layout, now 2; it is the only one of 27 chart sets to take this path (BENCHMARKS.md,
+#   section 0.1, session 19);
+_FULL_STEP = _SCALE_TOL * (1 - 1e-6)
 # - a rectangle trial that fails reports only the fraction of the area it placed: the next scale
 #   shrinks by its square root, by at least 3% and at most by half;
 _SHRINK_LEAST = 0.97
