@@ -300,3 +300,19 @@ def test_stable_order_is_a_stable_argsort():
             assert np.array_equal(
                 canvas._stable_order(keys, n), np.argsort(keys[:n], kind="mergesort")
             )
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 9), (9, 1), (7, 300), (40, 33)])
+def test_leading_edges_are_the_cells_a_move_newly_covers(shape) -> None:
+    # brute force: a cell whose neighbour below (left) is outside the footprint, in row-major
+    # order; the kernel reads only mask[:rows, :cols] of a larger buffer (as the trial's slots)
+    rng = np.random.default_rng(shape[0] * 1000 + shape[1])
+    rows, cols = shape
+    big = rng.random((rows + 3, cols + 5)) < 0.3
+    mask = rng.random(shape) < 0.6
+    big[:rows, :cols] = mask
+    down, left = canvas._leading_edges(big, rows, cols)
+    below = np.vstack([np.zeros((1, cols), bool), mask[:-1]])
+    before = np.hstack([np.zeros((rows, 1), bool), mask[:, :-1]])
+    assert np.array_equal(down, np.argwhere(mask & ~below))
+    assert np.array_equal(left, np.argwhere(mask & ~before))
