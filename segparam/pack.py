@@ -406,7 +406,7 @@ def _prepare(
             raise InvalidMeshError(f"chart {i}: uv must be (n, 2) with n >= 3, got {uv.shape}")
         if F.ndim != 2 or F.shape[1] != 3 or F.shape[0] == 0:
             raise InvalidMeshError(f"chart {i}: faces must be (m, 3) with m >= 1, got {F.shape}")
-        if not np.issubdtype(F.dtype, np.integer):
+        if F.dtype.kind not in "iu":  # np.issubdtype(F.dtype, np.integer), 10x cheaper
             raise InvalidMeshError(f"chart {i}: faces must be integers, got dtype {F.dtype}")
         uv_list.append(uv)
         F_list.append(F)
@@ -853,7 +853,7 @@ def _scale_bounds(charts: list[_Chart], resolution: int, padding: int) -> tuple[
     than that square. No scale above the smaller fits."""
     inner = resolution - 2 * padding
     total = sum(ch.area for ch in charts)
-    longest = max(float(ch.extent.max()) for ch in charts)
+    longest = float(np.array([ch.extent for ch in charts]).max())
     by_area = inner / np.sqrt(total)
     by_side = max(inner - 2 * _MARGIN, 1e-9) / longest
     return float(by_area), float(by_side)
@@ -904,7 +904,7 @@ def _trial_setup(charts: list[_Chart], cfg: PackConfig) -> tuple:
     else:
         trial, rules = _rect_trial, ("boxes",)
     areas = np.array([ch.area for ch in charts])
-    longest = np.array([ch.extent.max() for ch in charts])
+    longest = np.array([ch.extent for ch in charts]).max(axis=1)
     order = np.lexsort((np.arange(len(charts)), -longest, -areas))
     oriented = _Angles(charts, angles) if cfg.method == "raster" else None
     return trial, rules, order, turns, oriented

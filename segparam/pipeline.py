@@ -762,11 +762,12 @@ def _assemble(
     offsets = np.r_[0, np.cumsum(sizes)[:-1]]
     uv = np.concatenate(packing.uvs)
     uv_vertex = np.concatenate([c.vertices for c in charts])
+    n_faces = np.array([len(c.faces) for c in charts])
+    faces = np.concatenate([c.faces for c in charts])  # every face once
     uv_F = np.empty_like(F)
+    uv_F[faces] = np.concatenate([c.local_F for c in charts]) + np.repeat(offsets, n_faces)[:, None]
     chart_of_face = np.empty(len(F), dtype=np.int64)
-    for k, c in enumerate(charts):  # loop over charts
-        uv_F[c.faces] = c.local_F + offsets[k]
-        chart_of_face[c.faces] = k
+    chart_of_face[faces] = np.repeat(np.arange(len(charts)), n_faces)
     return Atlas(
         V=V,
         F=F,
