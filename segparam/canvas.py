@@ -296,9 +296,9 @@ def _pool_rows(
 def _leading_edges(mask, rows, cols):  # pragma: no cover - compiled
     """The footprint's lower and left edges: its cells (i, j) whose neighbour below (i - 1, j),
     respectively to the left (i, j - 1), is not in it, i.e. the texels that a one-texel move
-    down (left) newly covers, each list in row-major order. Two passes over the mask for both
-    lists (count, then fill: a rows * cols buffer would be megabytes for a large chart); the
-    count adds bytes, without a branch per cell: each placement rule 3-6% faster on 16 captured
+    down (left) newly covers, each list in row-major order. The lists are counted first, then
+    filled (a rows * cols buffer would be megabytes for a large chart); each count is a pass
+    that adds bytes, without a branch per cell: each placement rule 3-6% faster on 16 captured
     chart sets (BENCHMARKS.md section 0.1, session 19)."""
     m = mask.view(np.uint8)
     n_down = 0
