@@ -206,7 +206,14 @@ def segment_pairs_cross(
 
     d1, d2 = orient(c, d, a), orient(c, d, b)
     d3, d4 = orient(a, b, c), orient(a, b, d)
-    hit = (d1 * d2 <= 0) & (d3 * d4 <= 0)
+    # Segments that meet have overlapping boxes. The orientation signs alone are rounding for
+    # nearly collinear segments: the straight borders of an exact isometry (an unrolled
+    # cylinder's rim) read as crossing disjoint segments further along the same line.
+    boxes = (
+        np.maximum(np.minimum(a, b), np.minimum(c, d))
+        <= np.minimum(np.maximum(a, b), np.maximum(c, d))
+    ).all(axis=1)
+    hit = (d1 * d2 <= 0) & (d3 * d4 <= 0) & boxes
     collinear = (d1 == 0) & (d2 == 0)
     if collinear.any():
         # Collinear segments meet only if their projections on the common line overlap.

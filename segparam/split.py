@@ -87,6 +87,7 @@ from .parameterize import (
 from .quality import ChartQuality, chart_quality
 from .refine import ANGLE_WEIGHT, SMALL_CHART_FACES, slim_refine
 from .segment import divide, divide_many, face_affinity
+from .unfold import EDGE_TOL, FLAT_TOL, developable, unroll_charts
 
 log = logging.getLogger(__name__)
 
@@ -277,7 +278,8 @@ class Chart:
         Bisections from the segmentation chart to this piece.
     method : str
         ``"hessian"`` / ``"classic-hlle"`` (the solver), ``"planar"`` (a planar chart, projected
-        onto its plane: exact) or ``"projection"`` (the fallback for small or failing pieces).
+        onto its plane: exact), ``"developable"`` (a developable one, unrolled: exact, see
+        :mod:`segparam.unfold`) or ``"projection"`` (the fallback for small or failing pieces).
     """
 
     faces: np.ndarray
@@ -995,6 +997,29 @@ def _bulk_charts(
     # rejected, as the solver alone would raise on it: the brain-2k's 8-12-face pieces of the
     # split rounds were solved one by one for want of MAX_EXTEND spare vertices, most fine.)
     go = solver[cand] & manifold & (topo["loops"] >= 1) & ~planar_ok & ~(c_planar & ~disk)
+    # Developable disks (a cylinder's side, a cone's): unrolled, the exact isometry, not solved.
+    # Only a disk's boundary vertices (2 V - F - 2 of them) may be bent: a chart with more bent
+    # vertices than that is not tested further (every chart of an organic surface).
+    flat = go & disk
+    if flat.any():
+        angles = np.bincount(Fu.ravel(), weights=corner_angles(Vu, Fu).ravel(), minlength=len(Vu))
+        bent = np.abs(2 * np.pi - angles) > FLAT_TOL
+        n_bent = np.bincount(vert_chart, weights=bent, minlength=len(cand))
+        flat &= n_bent <= 2 * np.bincount(vert_chart, minlength=len(cand)) - nf[cand] - 2
+    flat = np.flatnonzero(flat)
+    if len(flat):
+        Vd, Fd, vd = part(flat)
+        flat = flat[developable(Vd, Fd, vd, len(flat))]
+    if len(flat):
+        Vd, Fd, vd = part(flat)
+        uv, error = unroll_charts(Vd, Fd, vd, len(flat))
+        unrolled = error <= EDGE_TOL
+        uv[~unrolled[vd]] = 0.0  # not measured as maps: NaN where a chart was not reached
+        uv -= np.minimum.reduceat(uv, np.searchsorted(vd, np.arange(len(flat))))[vd]
+        q = charts_quality(Vd, Fd, uv, vd, len(flat))
+        kept = unrolled & q["bijective"]
+        emit(flat, vd, uv, q, kept, "developable")
+        go[flat[kept]] = False
     holed = np.flatnonzero(go & (topo["loops"] >= 2))
     # Tubes are not solved as they are: one of two loops is cut open into a disk and solved with
     # the others (as _opened does alone), one of more loops is split.
@@ -1014,6 +1039,13 @@ def _bulk_charts(
                     rejected[cand[c]] = True
                 continue
             F_cut, copy_of = cut_along(local_F, cut)
+            unrolled = _unrolled(V[verts[copy_of]], F_cut, tube=True)
+            if unrolled is not None:  # a developable tube (a drilled hole's wall): unrolled
+                uv, quality = unrolled
+                rows = order[bounds[cand[c]] : bounds[cand[c] + 1]]
+                out[int(cand[c])] = ([Chart(rows, verts[copy_of], F_cut, uv * size, quality,
+                                            int(cand[c]), 0, "developable")], True)  # fmt: skip
+                continue
             if len(copy_of) <= DENSE_LIMIT:  # else _try_piece solves it alone
                 opened = np.r_[opened, c]
                 cuts.append((V[verts[copy_of]], F_cut, copy_of))
@@ -1331,7 +1363,12 @@ def _try_pieces(tasks: list[tuple], cfg: SplitConfig, seed: int, helpers: Helper
     status)]``, in order. With helpers (once started, or for ``FORK_MIN_FACES`` faces or more),
     the pieces are dealt to the processes largest first, each to the least loaded (faces), and
     solved side by side: each piece's result is its own, whichever process solves it."""
-    sizes = np.array([len(t[2]) for t in tasks], dtype=np.int64)
+    # A developable piece unrolls in one pass over its faces (segparam.unfold): no solver work
+    # to share, and forking a helper for it cost the pipe of bench_atlas.py more than it saved.
+    sizes = np.array(
+        [0 if _developable_piece(V, F, faces) else len(faces) for V, F, faces, *_ in tasks],
+        dtype=np.int64,
+    )  # loop over the pieces solved alone: a few
     jobs = _shares(helpers, len(tasks), int(sizes.sum()))
     if jobs <= 1:
         return _try_all(tasks, cfg=cfg, seed=seed)
@@ -1348,6 +1385,14 @@ def _try_pieces(tasks: list[tuple], cfg: SplitConfig, seed: int, helpers: Helper
         for i, result in zip(g.tolist(), results, strict=True):
             out[i] = result
     return out
+
+
+def _developable_piece(V: np.ndarray, F: np.ndarray, faces: np.ndarray) -> bool:
+    """Whether the piece ``F[faces]`` of a chart (vertices ``V``) will likely unroll rather
+    than go to the solver: developable (:func:`segparam.unfold.developable`), a strip one
+    triangle wide included (a hole's wall; a strip of a curved surface is small work anyway).
+    An estimate of the work, for dealing the pieces out only."""
+    return bool(developable(V, F[faces], np.zeros(len(V), dtype=np.int64), 1, strips=True)[0])
 
 
 def _try_all(tasks: list[tuple], *, cfg: SplitConfig, seed: int) -> list:
@@ -1394,6 +1439,11 @@ def _try_piece(
         if _tubes(Vl, local_F, np.zeros(len(local_F), dtype=np.int64), 1)[0]:
             log.debug("chart %d depth %d: a tube (TUBE_TURNING), cut open or split", src, depth)
             return _opened(Vl, local_F, faces, vertices, src, depth, cfg, seed, status)
+        unrolled = _unrolled(Vl, local_F)
+        if unrolled is not None:
+            if status is not None:
+                status["bijective"] = True
+            return Chart(faces, vertices, local_F, *unrolled, src, depth, "developable")
         try:
             result = _solved(Vl, local_F, len(faces), cfg, seed)
         except InvalidMeshError as exc:  # not a disk (e.g. a half that pinches): split it
@@ -1421,6 +1471,24 @@ def _try_piece(
     ):
         return Chart(faces, vertices, local_F, uv, quality, src, depth, "projection")
     return None
+
+
+def _unrolled(
+    V: np.ndarray, F: np.ndarray, *, tube: bool = False
+) -> tuple[np.ndarray, ChartQuality] | None:
+    """A developable piece's unrolled map (:mod:`segparam.unfold`) and its quality, lower
+    corner at 0, if the piece is developable, unrolls consistently and bijectively; else None
+    (the solver maps it). ``tube``: the piece is a tube cut open, developable even without
+    inner vertices (``developable(..., strips=True)``)."""
+    vert_chart = np.zeros(len(V), dtype=np.int64)
+    if not developable(V, F, vert_chart, 1, strips=tube)[0]:
+        return None
+    uv, error = unroll_charts(V, F, vert_chart, 1)
+    if not error[0] <= EDGE_TOL:
+        return None
+    uv = uv - uv.min(axis=0)
+    q = charts_quality(V, F, uv, vert_chart, 1)
+    return (uv, quality_records(q)[0]) if q["bijective"][0] else None
 
 
 def _solved(V: np.ndarray, F: np.ndarray, n_faces: int, cfg: SplitConfig, seed: int):
@@ -1480,6 +1548,12 @@ def _opened(
     if cut is None:
         return None
     F_cut, copy_of = cut_along(F, cut)
+    unrolled = _unrolled(V[copy_of], F_cut, tube=True)
+    if unrolled is not None:
+        if status is not None and "bijective" not in status:
+            status["bijective"] = True
+        log.debug("chart %d depth %d: cut open and unrolled", src, depth)
+        return Chart(faces, vertices[copy_of], F_cut, *unrolled, src, depth, "developable")
     try:
         result = _solved(V[copy_of], F_cut, len(faces), cfg, seed)
     except InvalidMeshError as exc:  # e.g. too thin for the solver's neighbourhoods: split it

@@ -4,6 +4,7 @@ import trimesh
 from meshes import folded_strip, plate_with_holes, tri_grid
 
 from segparam.errors import ConfigError
+from segparam.mesh import boundary_edges
 from segparam.quality import chart_quality
 from segparam.segment import segment
 from segparam.split import SplitConfig, chart_face_cover, parameterize_charts, project_chart
@@ -67,10 +68,21 @@ def test_planar_charts_are_projected_exactly_and_first_pass():
     (chart,) = cs.charts
     assert chart.method == "planar" and cs.first_pass_bijective[0]
     assert procrustes_residual(chart.uv, V[chart.vertices, :2]) < 1e-12
-    # One vertex a thousandth of an edge out of the plane: the solver runs.
     a, b, c = V3[F[0]]
     n = np.cross(b - a, c - a)
-    V3[F[0, 0]] += 1e-3 * np.linalg.norm(b - a) * n / np.linalg.norm(n)
+    off = 1e-3 * np.linalg.norm(b - a) * n / np.linalg.norm(n)
+    # A corner a thousandth of an edge out of the plane: its triangle folds along an edge, the
+    # chart is developable and unrolled, its side lengths kept exactly.
+    bent = V3.copy()
+    bent[F[0, 0]] += off
+    (chart,) = parameterize_charts(bent, F, np.zeros(len(F), dtype=np.int64)).charts
+    assert chart.method == "developable"
+    E = chart.local_F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    lengths = np.linalg.norm(np.diff(bent[chart.vertices][E], axis=1)[:, 0], axis=1)
+    assert np.allclose(np.linalg.norm(np.diff(chart.uv[E], axis=1)[:, 0], axis=1), lengths)
+    # An interior vertex out of the plane: curved there, the solver runs.
+    inner = np.setdiff1d(np.arange(len(V3)), boundary_edges(F).ravel())[0]
+    V3[inner] += off
     cs = parameterize_charts(V3, F, np.zeros(len(F), dtype=np.int64))
     assert cs.charts[0].method == "hessian"
 
@@ -262,13 +274,17 @@ def test_a_chart_curved_all_over_is_not_bisected_for_the_gain(monkeypatch):
     assert _atlas_excess(V, F, halves) < _atlas_excess(V, F, cs) - split.MIN_SPLIT_GAIN
 
 
-def _tube(n_theta: int = 24, n_z: int = 5, height: float = 0.8, radius: float = 1.0):
-    """An open cylinder (two boundary loops, each a geodesic: turning 0)."""
+def _tube(
+    n_theta: int = 24, n_z: int = 5, height: float = 0.8, radius: float = 1.0, bulge: float = 0.0
+):
+    """An open cylinder (two boundary loops, each a geodesic: turning 0): a prism's wall, flat
+    facets and developable, or with ``bulge`` a barrel, its radius that much larger half way up
+    (curved at every inner vertex)."""
     theta = 2 * np.pi * np.arange(n_theta) / n_theta
     z = np.linspace(0.0, height, n_z)
+    r = radius * (1 + bulge * np.sin(np.pi * z / height))[:, None]
     V = np.stack(
-        [radius * np.cos(theta)[None].repeat(n_z, 0), radius * np.sin(theta)[None].repeat(n_z, 0),
-         z[:, None].repeat(n_theta, 1)], -1,
+        [r * np.cos(theta)[None], r * np.sin(theta)[None], z[:, None].repeat(n_theta, 1)], -1,
     ).reshape(-1, 3)  # fmt: skip
     i, j = (a.ravel() for a in np.meshgrid(np.arange(n_z - 1), np.arange(n_theta), indexing="ij"))
     a, b = i * n_theta + j, i * n_theta + (j + 1) % n_theta
@@ -309,7 +325,7 @@ def test_a_tube_is_cut_open_into_one_chart(monkeypatch, batched):
     import segparam.split as split
     from segparam.mesh import boundary_loops
 
-    V, F = _tube(n_theta=32, n_z=6, height=1.5)  # 6.3 round, 1.5 high: opens into 4.2:1
+    V, F = _tube(n_theta=32, n_z=6, height=1.5, bulge=0.01)  # 6.3 round, 1.5 high: 4.2:1
     loops = []
     batched_solver, alone = split.solve_charts, split.parameterize_chart
 
@@ -333,6 +349,28 @@ def test_a_tube_is_cut_open_into_one_chart(monkeypatch, batched):
     assert np.array_equal(chart.vertices[chart.local_F], F[chart.faces])
     assert len(chart.vertices) == len(V) + 6  # the cut: 6 vertices from loop to loop, twice
     assert np.array_equal(chart_face_cover(out.charts, len(F)), np.ones(len(F)))
+
+
+@pytest.mark.parametrize("batched", [True, False], ids=["batched", "alone"])
+def test_a_developable_tube_is_cut_open_and_unrolled(monkeypatch, batched):
+    """A prism's wall (a drilled hole's in a CAD part) is developable: cut open, it is unrolled
+    (segparam.unfold), an exact isometry, and the solver never runs, batched or alone."""
+    import segparam.split as split
+
+    def no_solver(*args, **kwargs):
+        raise AssertionError("the solver ran")
+
+    monkeypatch.setattr(split, "solve_charts", no_solver)
+    monkeypatch.setattr(split, "parameterize_chart", no_solver)
+    if not batched:
+        monkeypatch.setattr(split, "BATCH_MAX_VERTICES", 10)
+    V, F = _tube(n_theta=32, n_z=6, height=1.5)
+    out = parameterize_charts(V, F, np.zeros(len(F), dtype=np.int64), config=SplitConfig(n_jobs=1))
+    (chart,) = out.charts
+    assert chart.method == "developable" and out.first_pass_bijective[0]
+    assert chart.quality.bijective and chart.quality.l2_stretch == pytest.approx(1.0, abs=1e-12)
+    assert len(chart.vertices) == len(V) + 6  # the cut: 6 vertices from loop to loop, twice
+    check_chart_set(V, F, out)
 
 
 @pytest.mark.parametrize("batched", [True, False], ids=["batched", "alone"])
