@@ -75,7 +75,7 @@ def unroll_charts(
         the vertices left.
     error : (n_charts,) float ndarray
         Per chart, the largest relative change of a triangle side (see `EDGE_TOL`); infinite for
-        a chart not reached whole.
+        a chart not reached whole, NaN where a side of length 0 left a corner unplaceable.
     """
     face_chart = vert_chart[F[:, 0]]
     fstart = np.searchsorted(face_chart, np.arange(n_charts + 1))
@@ -146,7 +146,9 @@ def _unroll(V, F, fstart):  # pragma: no cover - compiled
                 d3 = np.sqrt(_d2(V, p, q))
                 du, dv = uv[p, 0] - uv[q, 0], uv[p, 1] - uv[q, 1]
                 d2 = np.sqrt(du * du + dv * dv)
-                worst = max(worst, abs(d2 - d3) / max(d3, 1e-300))
+                change = abs(d2 - d3) / max(d3, 1e-300)
+                if not change <= worst:  # NaN too (a side of length 0 laid nothing): kept
+                    worst = change
         error[ch] = worst
     return uv, error
 
@@ -161,14 +163,17 @@ def _d2(V, p, q):  # pragma: no cover - compiled
 @njit(cache=True, nogil=True)
 def _third(V, uv, p, q, r):  # pragma: no cover - compiled
     """Lay vertex r of the oriented triangle (p, q, r) given p and q in the plane: to the left
-    of p -> q, at its 3-D coordinates along the side and across it."""
+    of p -> q, at its 3-D coordinates along the side and across it; not at all if the side has
+    length 0 (in 3-D or as laid)."""
     ex, ey, ez = V[q, 0] - V[p, 0], V[q, 1] - V[p, 1], V[q, 2] - V[p, 2]
     wx, wy, wz = V[r, 0] - V[p, 0], V[r, 1] - V[p, 1], V[r, 2] - V[p, 2]
     length = np.sqrt(ex * ex + ey * ey + ez * ez)
-    along = (wx * ex + wy * ey + wz * ez) / length
-    across = np.sqrt(max(wx * wx + wy * wy + wz * wz - along * along, 0.0))
     du, dv = uv[q, 0] - uv[p, 0], uv[q, 1] - uv[p, 1]
     flat = np.sqrt(du * du + dv * dv)
+    if not (length > 0 and flat > 0):  # a side of length 0: r stays unplaced (NaN)
+        return
+    along = (wx * ex + wy * ey + wz * ez) / length
+    across = np.sqrt(max(wx * wx + wy * wy + wz * wz - along * along, 0.0))
     ux, uy = du / flat, dv / flat
     uv[r, 0] = uv[p, 0] + along * ux - across * uy
     uv[r, 1] = uv[p, 1] + along * uy + across * ux

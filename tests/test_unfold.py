@@ -131,3 +131,13 @@ def test_a_hole_wall_one_quad_high_unrolls():
     assert not developable(Vc, wall.local_F, _one(Vc), 1)[0]
     assert developable(Vc, wall.local_F, _one(Vc), 1, strips=True)[0]
     assert np.allclose(_side_lengths(wall.uv, wall.local_F), _side_lengths(Vc, wall.local_F))
+
+
+def test_a_side_of_length_zero_is_laid_and_left_to_the_checks():
+    from segparam.split import _unrolled
+
+    V, F = tri_grid(5, 5)
+    V[7] = V[6]  # two corners at one point: the triangles on that side have no area
+    uv, error = unroll_charts(V, F, _one(V), 1)  # no division by zero
+    assert np.isfinite(uv).all() and error[0] < EDGE_TOL
+    assert _unrolled(V, F) is None  # its triangles of no area: no map kept, the solver decides
