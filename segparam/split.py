@@ -1481,6 +1481,8 @@ def _unrolled(
     (the solver maps it). ``tube``: the piece is a tube cut open, developable even without
     inner vertices (``developable(..., strips=True)``)."""
     vert_chart = np.zeros(len(V), dtype=np.int64)
+    if _bent_vertices(V, F) > 2 * len(V) - len(F) - 2:  # more than a disk's boundary has
+        return None
     if not developable(V, F, vert_chart, 1, strips=tube)[0]:
         return None
     uv, error = unroll_charts(V, F, vert_chart, 1)
@@ -1489,6 +1491,15 @@ def _unrolled(
     uv = uv - uv.min(axis=0)
     q = charts_quality(V, F, uv, vert_chart, 1)
     return (uv, quality_records(q)[0]) if q["bijective"][0] else None
+
+
+def _bent_vertices(V: np.ndarray, F: np.ndarray) -> int:
+    """How many vertices' angles do not sum to a full turn (within ``FLAT_TOL``): on a
+    developable disk only its boundary's, ``2 V - F - 2`` of them at most, may; every vertex of
+    a chart of an organic surface does (the screen before :func:`segparam.unfold.developable`,
+    which finds the boundary)."""
+    angles = np.bincount(F.ravel(), weights=corner_angles(V, F).ravel(), minlength=len(V))
+    return int(np.count_nonzero(np.abs(2 * np.pi - angles) > FLAT_TOL))
 
 
 def _solved(V: np.ndarray, F: np.ndarray, n_faces: int, cfg: SplitConfig, seed: int):
