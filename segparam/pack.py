@@ -47,8 +47,10 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 
 import numpy as np
+import scipy.sparse as sp
 from numba import njit
 from numpy.typing import ArrayLike
+from scipy.sparse.csgraph import connected_components
 
 from segparam import canvas
 from segparam.errors import (
@@ -100,6 +102,12 @@ _SLIDE_STEPS = 1024
 # A chart whose convex hull fills at least this much of its minimum-area box is a rectangle for
 # the packer: it only turns by quarter turns.
 _BOXY = 0.95
+# A convex chart whose hull lies between two circles this close (texels at the largest scale a
+# search can try) is round for the packer: turned by any angle its footprint moves by less than
+# that, so it only turns by quarter turns too. The discs and rings of turned CAD parts (48-gons:
+# 0.2% of their radius, 0.6 texels for a 275-texel washer): the bushing of bench_atlas.py packs
+# the same layout in 64 instead of 164 ms (BENCHMARKS.md section 0.1, session 20).
+_ROUND_TEXELS = 1.0
 # Charts of at most this many uv points find their hull and minimum-area box together, by testing
 # every directed pair of points (a qhull hull per chart cost 0.26 of the 0.41 s that preparing
 # 2,000 triangles took); larger charts get a compiled monotone chain each (`_hulls`).
@@ -300,6 +308,9 @@ class _Chart:
     area: float  # 3-D area (= uv area of q)
     boxy: bool  # its convex hull nearly fills its minimum-area box (turns by quarter turns only)
     boundary: np.ndarray | None  # (k, 2) directed boundary edges for `_fill_kernel`, or None
+    # convex, between circles of radii r and r + roundness (3-D units) about its hull's centroid
+    # (infinite if not, or not measured): see `_ROUND_TEXELS`
+    roundness: float = np.inf
 
 
 # ----------------------------------------------------------------------------------------------
@@ -451,7 +462,7 @@ def _prepare(
             f"chart {i} has uv area {area_uv[i]:.3g} (bounding box {span[i]:.3g}); it must be "
             "mapped to the plane with a positive area"
         )
-    angle, fill = _min_area_angles(U, nv, voff)
+    angle, fill, hull_area, gap, radius = _min_area_angles(U, nv, voff)
     k = np.sqrt(areas / area_uv)
     c, s = np.cos(angle), np.sin(angle)
     cv, sv = c[vchart], s[vchart]
@@ -468,6 +479,7 @@ def _prepare(
     # the outline rasterizer needs every triangle counter-clockwise (no flip, no sliver)
     ccw = np.bincount(fchart, signed_areas(Q, G) <= 0, minlength=n) == 0
     outlines = _outlines(G, fchart, voff, ccw, len(U))
+    roundness = _roundness(Q, voff, outlines, hull_area * k * k, gap * k, radius * k)
     return [
         _Chart(
             i,
@@ -479,13 +491,16 @@ def _prepare(
             float(areas[i]),
             bool(fill[i] >= _BOXY),
             outlines[i],
+            float(roundness[i]),
         )  # fmt: skip
         for i in range(n)  # loop over charts: views into the arrays above
     ]
 
 
 def _min_area_angles(U: np.ndarray, nv: np.ndarray, voff: np.ndarray):
-    """`_min_area_angle` of every chart's points ``U[voff[i] : voff[i] + nv[i]]``: (angles, fills).
+    """`_min_area_angle` of every chart's points ``U[voff[i] : voff[i] + nv[i]]``: (angles,
+    fills), and for the charts of more than `_SMALL_HULL` points their hulls' areas, ring gaps
+    and radii (`_hull_boxes`' ``rings``; NaN, infinite and 0 for the others).
 
     Charts of up to `_SMALL_HULL` points are done together, a group per point count: a directed
     pair (i, j) is a hull edge when no point lies right of it and the points on its line lie
@@ -495,6 +510,7 @@ def _min_area_angles(U: np.ndarray, nv: np.ndarray, voff: np.ndarray):
     """
     n = len(nv)
     angle, fill = np.zeros(n), np.zeros(n)
+    hull_area, gap, radius = np.full(n, np.nan), np.full(n, np.inf), np.zeros(n)
     for size in np.unique(nv[nv <= _SMALL_HULL]):  # loop over the few small point counts
         idx = np.flatnonzero(nv == size)
         P = U[voff[idx][:, None] + np.arange(size)]  # (c, n, 2)
@@ -521,19 +537,21 @@ def _min_area_angles(U: np.ndarray, nv: np.ndarray, voff: np.ndarray):
         fill[idx] = area / best_area
     large = np.flatnonzero(nv > _SMALL_HULL)
     if len(large):
-        angle[large], fill[large] = _hull_boxes(
-            [U[voff[i] : voff[i] + nv[i]] for i in large], large
+        angle[large], fill[large], hull_area[large], gap[large], radius[large] = _hull_boxes(
+            [U[voff[i] : voff[i] + nv[i]] for i in large], large, rings=True
         )
-    return angle, fill
+    return angle, fill, hull_area, gap, radius
 
 
 def _hull_boxes(
-    points: list[np.ndarray], ids: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray]:
+    points: list[np.ndarray], ids: np.ndarray | None = None, *, rings: bool = False
+) -> tuple[np.ndarray, ...]:
     """`_min_area_angle` of several point sets: their convex hulls all at once (`_hulls`), then
     the boxes of all hulls' edge directions in one `_boxes_along` call (hulls padded with their
     first vertex, whose directions are not valid). The same angles and fills as one
-    `_min_area_angle` per set. `ids` name the sets (charts) in errors.
+    `_min_area_angle` per set. `ids` name the sets (charts) in errors. With `rings`, also each
+    hull's area and the two circles about its centroid that it lies between: the farthest
+    vertex's distance, and how much nearer the nearest edge's line comes (`_ROUND_TEXELS`).
 
     A qhull hull per set (scipy's ``ConvexHull``) cost 0.15 ms each, 0.18 s of the 0.26 s that
     preparing 300 spheres' 1,203 charts took; a hull now starts at its lowest-leftmost vertex, so
@@ -552,10 +570,12 @@ def _hull_boxes(
     x, y = H[:, 0], H[:, 1]
     slot = np.arange(len(H)) - start[which]
     nxt = np.where(slot + 1 < count[which], np.arange(len(H)) + 1, start[which])
+    in_hull = slot < count[which]  # the rows past a hull's count repeat its vertices
+    cross = np.where(in_hull, x * y[nxt] - x[nxt] * y, 0)
     # each hull's own terms, summed in order: a padded row's sum (pairwise over the widest
     # hull) would differ in the last bit from the hull's alone, and the boxes must not depend
     # on the batch
-    area = 0.5 * np.add.reduceat(np.where(slot < count[which], x * y[nxt] - x[nxt] * y, 0), start)
+    area = 0.5 * np.add.reduceat(cross, start)
     bad = (count < 3) | ~(area > 0)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
@@ -570,7 +590,17 @@ def _hull_boxes(
     d = H[start[:, None] + (slot[None, :] + 1) % count[:, None]] - P  # edge k: vertex k -> k+1
     theta = np.arctan2(d[..., 1], d[..., 0])
     angle, box = _boxes_along(P, theta, valid)
-    return angle, area / box
+    if not rings:
+        return angle, area / box
+    # the centroid of each hull polygon, then its farthest vertex and its nearest edge's line
+    cx = np.add.reduceat((x + x[nxt]) * cross, start) / (6 * area)
+    cy = np.add.reduceat((y + y[nxt]) * cross, start) / (6 * area)
+    dx, dy = x - cx[which], y - cy[which]
+    ex, ey = x[nxt] - x, y[nxt] - y
+    line = np.abs(ex * dy - ey * dx) / np.maximum(np.hypot(ex, ey), 1e-300)
+    radius = np.maximum.reduceat(np.where(in_hull, np.hypot(dx, dy), 0.0), start)
+    nearest = np.minimum.reduceat(np.where(in_hull, line, np.inf), start)
+    return angle, area / box, area, radius - nearest, radius
 
 
 @njit(cache=True, nogil=True)
@@ -641,6 +671,37 @@ def _outlines(G: np.ndarray, fchart: np.ndarray, voff: np.ndarray, ok: np.ndarra
     ]  # loop over charts: slices
 
 
+def _roundness(
+    Q: np.ndarray,
+    voff: np.ndarray,
+    outlines: list,
+    hull_area: np.ndarray,
+    gap: np.ndarray,
+    radius: np.ndarray,
+) -> np.ndarray:
+    """Per chart, the width of the ring its hull lies in (`_hull_boxes`' ``rings``, 3-D units)
+    where the chart is convex (its outer boundary loop encloses its whole hull, to 1e-9 of its
+    area: holes allowed), else infinite (`_ROUND_TEXELS`). Only charts whose ring is within 2%
+    of their radius, with an outline (`_outlines`), have their loops measured: a loop over
+    those few (the discs and rings of CAD parts)."""
+    out = np.full(len(voff), np.inf)
+    for i in np.flatnonzero(gap <= 0.02 * radius).tolist():  # loop over the round ones: a few
+        B = outlines[i]
+        if B is None:
+            continue
+        q = Q[voff[i] :]
+        _, loop = connected_components(
+            sp.coo_matrix((np.ones(len(B)), (B[:, 0], B[:, 1])), shape=(B.max() + 1,) * 2),
+            directed=True,
+            connection="weak",
+        )
+        twice = q[B[:, 0], 0] * q[B[:, 1], 1] - q[B[:, 1], 0] * q[B[:, 0], 1]
+        enclosed = 0.5 * np.bincount(loop[B[:, 0]], weights=twice).max()  # the outer loop's
+        if enclosed >= hull_area[i] * (1 - 1e-9):
+            out[i] = gap[i]
+    return out
+
+
 # ----------------------------------------------------------------------------------------------
 # footprints at a given scale
 
@@ -680,10 +741,12 @@ class _Angles:
     the packing it serves, the empty trial canvas of each texture size (`empty_canvas`).
     """
 
-    def __init__(self, charts: list[_Chart], angles: int) -> None:
+    def __init__(self, charts: list[_Chart], angles: int, scale: float = np.inf) -> None:
         n = len(charts)
         nv = np.array([len(ch.q) for ch in charts])
-        steps = np.where([ch.boxy for ch in charts], 1, angles)
+        # rectangles, and round charts at every scale up to `scale`: quarter turns only
+        quarter = [ch.boxy or ch.roundness * scale <= _ROUND_TEXELS for ch in charts]
+        steps = np.where(quarter, 1, angles)
         self.entry_ptr = np.r_[0, np.cumsum(steps)].astype(np.int64)
         e_chart = np.repeat(np.arange(n), steps)
         e_angle = (np.arange(len(e_chart)) - self.entry_ptr[e_chart]) * np.pi / (2 * steps[e_chart])
@@ -894,10 +957,11 @@ def _best_run(
     return placed, max(r[1] for r in runs), min(needs) if needs else None
 
 
-def _trial_setup(charts: list[_Chart], cfg: PackConfig) -> tuple:
+def _trial_setup(charts: list[_Chart], cfg: PackConfig, scale: float = np.inf) -> tuple:
     """What every trial of :func:`pack_charts` shares: the trial function, its placement
     rules, the charts' order (largest first; ties by the longer side, then by input order),
-    the quarter turns and the charts' turned outlines."""
+    the quarter turns and the charts' turned outlines (`_Angles`; `scale`: the largest a
+    trial will use, in texels per unit length)."""
     turns, angles = (4, int(cfg.angle_steps)) if cfg.rotate else (1, 1)
     if cfg.method == "raster":
         trial, rules = _raster_trial, _RULE_ORDER
@@ -906,7 +970,7 @@ def _trial_setup(charts: list[_Chart], cfg: PackConfig) -> tuple:
     areas = np.array([ch.area for ch in charts])
     longest = np.array([ch.extent for ch in charts]).max(axis=1)
     order = np.lexsort((np.arange(len(charts)), -longest, -areas))
-    oriented = _Angles(charts, angles) if cfg.method == "raster" else None
+    oriented = _Angles(charts, angles, scale) if cfg.method == "raster" else None
     return trial, rules, order, turns, oriented
 
 
@@ -945,7 +1009,7 @@ def _limited(
 
 def _one_trial(charts: list[_Chart], s: float, G: int, p: int, cfg: PackConfig) -> _Placed | None:
     """The placement rules once at scale ``s`` on a ``G`` texture: the layout, or None."""
-    trial, rules, order, turns, oriented = _trial_setup(charts, cfg)
+    trial, rules, order, turns, oriented = _trial_setup(charts, cfg, s)
     if max(float(ch.extent.max()) for ch in charts) * s + 2 * _MARGIN > G - 2 * p:
         return None  # the longest chart alone is wider than the texture
     runs = [trial(charts, order, s, G, p, turns, rule, oriented) for rule in rules]
@@ -986,7 +1050,7 @@ def _pack_at_density(
             f"{len(charts)} charts do not fit a {G}x{G} texture with padding {p} at "
             f"{s:.6g} texels per unit length; lower the texel density or raise the resolution"
         )
-    trial, rules, order, turns, oriented = _trial_setup(charts, cfg)
+    trial, rules, order, turns, oriented = _trial_setup(charts, cfg, s)
     extent = max(float(ch.extent.max()) for ch in charts) * s
     area = sum(ch.area for ch in charts) * s * s
     G = int(np.ceil(max(np.sqrt(area / _FIRST_UTILIZATION), extent + 2 * _MARGIN + 1))) + 2 * p
@@ -1054,15 +1118,14 @@ def pack_charts(
         return _pack_at_density(uvs, faces, areas3d, cfg)
     charts = _prepare(uvs, faces, areas3d)
     G, p = int(cfg.resolution), int(cfg.padding)
-    setup = _trial_setup(charts, cfg)
-    rules = setup[1]
-
     # Safeguarded secant search on the scale: `lo` is the largest scale that fitted so far, no
     # scale above `hi` fits. Every trial runs the placement rules side by side (one thread each:
     # the compiled trials release the GIL); its outcome narrows the bracket and predicts the next
     # scale, until the stop rule holds.
     by_area, by_side = _scale_bounds(charts, G, p)
     hi = min(by_area, by_side)
+    setup = _trial_setup(charts, cfg, hi)
+    rules = setup[1]
     lo, best, failed = 0.0, None, False
     s = _first_scale(charts, G, p, by_area, by_side)
     n_trials = 0

@@ -663,3 +663,63 @@ def test_outlines_are_the_boundary_edges_and_refuse_bad_edges() -> None:
         want = sorted(e for e in directed if undirected[tuple(sorted(e))] == 1)
         assert sorted(map(tuple, out.tolist())) == want
     assert got[0] is not None and got[1] is None and got[2] is None and got[3] is not None
+
+
+# ----------------------------------------------------------------------------------------------
+# round charts turn by quarter turns only
+
+
+def _ring(n_theta: int = 48, inner: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """A washer: two concentric n-gons of radii `inner` and 1, one band of triangles."""
+    theta = 2 * np.pi * np.arange(n_theta) / n_theta
+    c = np.stack([np.cos(theta), np.sin(theta)], 1)
+    uv = np.vstack([inner * c, c])
+    j = np.arange(n_theta)
+    jn = (j + 1) % n_theta
+    F = np.vstack([np.stack([j, n_theta + j, n_theta + jn], 1), np.stack([j, n_theta + jn, jn], 1)])
+    return uv, F.astype(np.int64)
+
+
+def test_round_charts_are_measured_and_only_they() -> None:
+    from segparam import pack
+
+    uv_gear, F_gear = disc(48, 3)
+    uv_gear[1 + 2 * 48 :: 2] *= 0.9  # every other outer vertex pulled in: a round hull, teeth
+    shapes = [disc(48, 3), _ring(), disc(48, 3, aspect=1.1), (uv_gear, F_gear), disc(12, 2)]
+    charts = pack._prepare(  # at their uv areas: 3-D units are uv units
+        [uv for uv, _ in shapes], [F for _, F in shapes], [area_uv(*shape) for shape in shapes]
+    )
+    gap = 1 - np.cos(np.pi / 48)  # a regular 48-gon of radius 1 lies between 1 - gap and 1
+    assert [c.roundness for c in charts[:2]] == pytest.approx([gap, gap], rel=1e-3)
+    # an ellipse, teeth on the outline, a 12-gon (3.5% of its radius): not round
+    assert all(np.isinf(c.roundness) for c in charts[2:])
+
+
+def test_round_charts_turn_by_quarter_turns_at_scales_where_angles_move_no_texel() -> None:
+    from segparam import pack
+
+    uv, F = _ring()
+    charts = pack._prepare(
+        [uv, disc(24, 3, aspect=1.5)[0]], [F, disc(24, 3, aspect=1.5)[1]], [3, 3]
+    )
+    ring = charts[0].roundness
+    steps = lambda scale: np.diff(pack._Angles(charts, 6, scale).entry_ptr).tolist()  # noqa: E731
+    assert steps(0.9 / ring) == [1, 6]  # under a texel at every scale tried: quarter turns
+    assert steps(1.1 / ring) == [6, 6]  # over it at the largest: fine angles, as any chart
+
+
+def test_round_charts_pack_as_with_every_angle(monkeypatch) -> None:
+    from segparam import pack
+
+    rng = np.random.default_rng(3)
+    uvs, faces = [], []
+    for _ in range(12):
+        uv, F = _ring(48, rng.uniform(0.2, 0.7)) if rng.random() < 0.5 else disc(48, 3)
+        uvs.append(uv * rng.uniform(0.5, 2.0))
+        faces.append(F)
+    areas = np.array([area_uv(u, f) for u, f in zip(uvs, faces, strict=True)])
+    fast = pack_charts(uvs, faces, areas, config=PackConfig(resolution=512))
+    monkeypatch.setattr(pack, "_ROUND_TEXELS", -1.0)  # every round chart at every angle
+    slow = pack_charts(uvs, faces, areas, config=PackConfig(resolution=512))
+    assert_valid_layout(fast, faces)
+    assert fast.utilization >= slow.utilization - 0.005
