@@ -734,11 +734,12 @@ def _turns(k: np.ndarray, cols: np.ndarray, rows: np.ndarray) -> np.ndarray:
 class _Angles:
     """Every chart in every orientation angle the packer tries, flattened for `canvas.trial`.
 
-    Scale-free, so built once per `pack_charts` call. Per chart and angle (``a * 90 / steps``
-    degrees from the minimum-area frame, ``steps = angles`` unless the chart is a rectangle):
-    the chart's points turned by the angle with their minimum corner at the origin (3-D
-    units), their extent, and the rotation and offset that map them back. It also keeps, for
-    the packing it serves, the empty trial canvas of each texture size (`empty_canvas`).
+    Built once per `pack_charts` call (scale-free but for the round charts' test at the largest
+    scale). Per chart and angle (``a * 90 / steps`` degrees from the minimum-area frame, ``steps
+    = angles`` unless the chart is a rectangle or round): the chart's points turned by the angle
+    with their minimum corner at the origin (3-D units), their extent, and the rotation and
+    offset that map them back. It also keeps, for the packing it serves, the empty trial canvas
+    of each texture size (`empty_canvas`).
     """
 
     def __init__(self, charts: list[_Chart], angles: int, scale: float = np.inf) -> None:
