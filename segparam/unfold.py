@@ -7,9 +7,9 @@ flat one after the other: each triangle reached across an edge whose two ends ar
 the plane puts its third corner where the triangle's own side lengths put it. The Hessian
 solver finds the same map (up to a rigid motion and its rounding: its eigenfunctions are
 affine on a flat chart, paper sec. 2), and the refinement then has nothing to do; unrolling
-costs one pass over the faces instead (the pipe of ``benchmarks/bench_atlas.py``: its two
-walls, 2 x 2,730 faces, take 1.3 ms instead of ~0.1 s; BENCHMARKS.md, section 0.1, session
-20). It is to a developable chart what the projection onto its plane is to a planar one
+costs one pass over the faces instead (the pipe of ``benchmarks/bench_atlas.py``: each of its
+two walls, 2,048 faces, in 0.8 ms instead of ~0.07 s for the solver; BENCHMARKS.md, section
+0.1, session 20). It is to a developable chart what the projection onto its plane is to a planar one
 (``segparam.split``, method ``"planar"``).
 
 Every chart is checked, not trusted: the kernel reports the largest relative change of a
@@ -30,8 +30,9 @@ from .mesh import boundary_edges, corner_angles
 __all__ = ["EDGE_TOL", "FLAT_TOL", "developable", "unroll_charts"]
 
 #: Largest angle defect (radians) at an interior vertex of a chart taken as developable: CAD
-#: meshes are flat there to rounding (the bench's turned parts: below 1e-13), scans and organic
-#: surfaces are not within orders of magnitude (the realistic 2k brain's smallest: 1e-4).
+#: meshes are flat there to rounding (the bench's turned parts: 9e-16 at most), organic
+#: surfaces are not, at nearly any vertex (the realistic 2k brain's median 0.31, its least 8e-4;
+#: the 20k brain's least 7e-7, at one vertex of 10,000), and every inner vertex must be.
 FLAT_TOL = 1e-9
 #: Largest relative change of a triangle side an unrolled chart may have: rounding is ~1e-15
 #: per triangle laid, so even a chart of a million faces stays orders of magnitude under it.
