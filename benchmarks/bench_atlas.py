@@ -100,7 +100,7 @@ from segparam.mesh import face_areas
 from segparam.pack import footprint_conflicts
 from segparam.pipeline import PipelineConfig, build_atlas
 from segparam.quality import distortion, seam_length, signed_areas
-from segparam.remesh import mesh_quality, should_remesh
+from segparam.remesh import auto_policy, mesh_quality
 from segparam.synthetic import brain_like_surface
 
 RESOLUTION = 1024
@@ -562,7 +562,7 @@ def main() -> None:
             continue
         V = np.asarray(V, dtype=np.float64)
         F = np.asarray(F, dtype=np.int64)
-        auto, reason = should_remesh(mesh_quality(V, F))
+        auto, reason = auto_policy(V, F, mesh_quality(V, F))
         runs = [(run_segparam, ("off",)), (run_xatlas, ())]
         if auto:
             runs.insert(1, (run_segparam, ("auto",)))

@@ -6,8 +6,9 @@ already regular (valence ~6), isotropic remeshing creates valence-5 and valence-
 neighbourhoods then have to grow, and the solver gets worse. This module therefore
 
 * measures the triangle quality (:func:`mesh_quality`: angles, valence, edge-length spread),
-* decides from it (:func:`should_remesh`, the ``"auto"`` policy, thresholds measured by
-  ``benchmarks/bench_remesh.py``), and
+* decides from it (:func:`should_remesh`, thresholds measured by ``benchmarks/bench_remesh.py``;
+  the ``"auto"`` policy, :func:`auto_policy`, leaves out the faces that the split stage maps
+  exactly, without the solver, :func:`exact_faces`), and
 * remeshes with pymeshlab's isotropic explicit remeshing at the edge length of an equilateral
   mesh with the input's area and face count (:func:`equal_area_edge`, so the vertex count stays
   about the same; the mean edge length overestimates it on slivers), keeping boundaries, sharp
@@ -36,6 +37,8 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components as _csgraph_components
 from scipy.spatial import cKDTree
 
 from .errors import ConfigError, InvalidMeshError, check_choice, check_int, check_number
@@ -62,8 +65,10 @@ __all__ = [
     "MeshQuality",
     "RemeshConfig",
     "RemeshResult",
+    "auto_policy",
     "closest_boundary_points",
     "equal_area_edge",
+    "exact_faces",
     "mesh_quality",
     "remesh",
     "sharp_vertices",
@@ -299,6 +304,75 @@ def should_remesh(q: MeshQuality) -> tuple[bool, str]:
     if slivers:
         return True, f"slivers: {shape}; {conn}"
     return False, f"well-shaped triangles, kept: {shape}; {conn}"
+
+
+def auto_policy(
+    V: np.ndarray, F: np.ndarray, quality: MeshQuality, feature_angle: float = 30.0
+) -> tuple[bool, str]:
+    """The ``"auto"`` mode's decision for a checked mesh of this ``quality``
+    (:func:`mesh_quality`): :func:`should_remesh`, unless the slivers lie where no solver runs:
+    the faces of :func:`exact_faces` are left out of the count.
+
+    Returns
+    -------
+    remesh : bool
+    reason : str
+    """
+    go, reason = should_remesh(quality)
+    if not go:
+        return go, reason
+    exact = exact_faces(V, F, feature_angle)
+    rest = _quality(V, F[~exact]) if exact.any() and not exact.all() else None
+    if exact.all() or (rest is not None and not should_remesh(rest)[0]):
+        others = "" if rest is None else f"; the other faces: {should_remesh(rest)[1]}"
+        return False, (
+            f"{reason}; but {100 * exact.mean():.0f}% of the faces lie in planar or developable "
+            f"regions, mapped exactly whatever their shape{others}"
+        )
+    return go, reason
+
+
+def exact_faces(V, F, feature_angle: float = 30.0) -> np.ndarray:
+    """Faces of the regions that the split stage maps exactly, without the solver, whatever the
+    shape of their triangles: the regions between sharp edges (pymeshlab's test: normals more
+    than ``feature_angle`` apart) whose every inner vertex is flat (angle defect within
+    :data:`segparam.unfold.FLAT_TOL`): a CAD part's planar faces (projected) and its cylinders'
+    and cones' sides (unrolled). A region with no inner vertex (a strip) is not counted.
+
+    The ``"auto"`` policy counts slivers only on the other faces: the fan triangles of a turned
+    part's caps are slivers that remeshing would only make curved to rounding (and the capped
+    cylinder of ``benchmarks/bench_atlas.py`` 12x slower: 0.03 -> 0.39 s).
+
+    Returns
+    -------
+    (m,) bool ndarray
+    """
+    from .unfold import FLAT_TOL
+
+    V, F = np.asarray(V, dtype=np.float64), np.asarray(F)
+    n, m = len(V), len(F)
+    edge_index = edges(F)
+    pairs, _ = face_adjacency(F, edge_index=edge_index)
+    N = face_normals(V, F)
+    cos = (N[pairs[:, 0]] * N[pairs[:, 1]]).sum(axis=1)
+    smooth = ~((cos <= np.cos(np.radians(feature_angle))) & (cos >= -0.98))
+    A = sp.coo_matrix((np.ones(int(smooth.sum())), tuple(pairs[smooth].T)), shape=(m, m))
+    _, region = _csgraph_components(A, directed=False)
+    # a vertex inside a region: every face around it in that region, not on the mesh boundary
+    faces_region = np.repeat(region, 3)
+    lo = np.full(n, region.max(initial=0) + 1)
+    hi = np.full(n, -1)
+    np.minimum.at(lo, F.ravel(), faces_region)
+    np.maximum.at(hi, F.ravel(), faces_region)
+    inner = lo == hi
+    inner[boundary_edges(F, edge_index=edge_index).ravel()] = False
+    total = np.bincount(F.ravel(), weights=corner_angles(V, F).ravel(), minlength=n)
+    bent = inner & (np.abs(2 * np.pi - total) > FLAT_TOL)
+    n_regions = int(region.max(initial=-1)) + 1
+    flat = (np.bincount(lo[bent], minlength=n_regions) == 0) & (
+        np.bincount(lo[inner], minlength=n_regions) > 0
+    )
+    return flat[region]
 
 
 def sharp_vertices(V, F, feature_angle: float = 30.0) -> np.ndarray:
@@ -575,7 +649,7 @@ def remesh(V, F=None, *, config: RemeshConfig | None = None) -> RemeshResult:
     if config.mode == "off":
         return keep("remeshing is off")
     if config.mode == "auto":
-        go, reason = should_remesh(before)
+        go, reason = auto_policy(V, F, before, config.feature_angle)
         if not go:
             return keep(reason)
     else:

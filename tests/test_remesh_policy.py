@@ -100,3 +100,35 @@ def test_a_mesh_without_sharp_vertices_is_remeshed_as_before():
     V = V + np.c_[rng.normal(0, 0.01, (len(V), 2)), np.zeros(len(V))]
     res = remesh(V, F, config=RemeshConfig(mode="on"))
     assert res.remeshed and "sharp" not in res.reason
+
+
+# ---------------------------------------------------------------------------------------------
+# slivers where no solver runs
+
+
+def test_exact_faces_are_the_planar_and_developable_regions():
+    from segparam.remesh import exact_faces
+
+    m = trimesh.creation.cylinder(radius=1.0, height=3.0, sections=48)
+    # the side one quad high has no inner vertex: a strip proves nothing, it is not counted
+    exact = exact_faces(m.vertices, m.faces)
+    assert exact.any() and not exact.all()
+    m = m.subdivide()
+    assert exact_faces(m.vertices, m.faces).all()  # caps (planar) and side (developable)
+    s = trimesh.creation.icosphere(3)
+    assert not exact_faces(s.vertices, s.faces).any()
+    V, F = closed_cone()
+    exact = exact_faces(V, F)
+    assert exact[500:].all() and not exact[:500].any()  # the base, not the side (its tip)
+
+
+def test_a_capped_cylinders_slivers_are_not_remeshed():
+    """The caps' fan triangles are slivers, which "auto" remeshes on a curved surface; here
+    every face is mapped exactly (caps projected, side unrolled), so the mesh is kept."""
+    m = trimesh.creation.cylinder(radius=1.0, height=3.0, sections=48).subdivide().subdivide()
+    V, F = np.asarray(m.vertices), np.asarray(m.faces, dtype=np.int64)
+    r = remesh(V, F, config=RemeshConfig(mode="auto"))
+    assert not r.remeshed and "developable" in r.reason and "slivers" in r.reason
+    a = build_atlas(V, F, PipelineConfig(), seed=0)  # the default policy, "auto"
+    assert not a.remeshing.remeshed
+    assert sorted(c.method for c in a.charts.charts) == ["developable", "planar", "planar"]
