@@ -352,10 +352,8 @@ def exact_faces(V, F, feature_angle: float = 30.0) -> np.ndarray:
     V, F = np.asarray(V, dtype=np.float64), np.asarray(F)
     n, m = len(V), len(F)
     edge_index = edges(F)
-    pairs, _ = face_adjacency(F, edge_index=edge_index)
-    N = face_normals(V, F)
-    cos = (N[pairs[:, 0]] * N[pairs[:, 1]]).sum(axis=1)
-    smooth = ~((cos <= np.cos(np.radians(feature_angle))) & (cos >= -0.98))
+    pairs, _, crease = _creases(V, F, feature_angle, edge_index)
+    smooth = ~crease
     A = sp.coo_matrix((np.ones(int(smooth.sum())), tuple(pairs[smooth].T)), shape=(m, m))
     _, region = _csgraph_components(A, directed=False)
     # a vertex inside a region: every face around it in that region, not on the mesh boundary
@@ -454,15 +452,23 @@ def closest_boundary_points(
     return dist[rows, best], Q[rows, best]
 
 
-def _crease_edges_at(V: np.ndarray, F: np.ndarray, feature_angle: float) -> np.ndarray:
-    """Per vertex, how many of its edges pymeshlab takes for sharp (normals of the two faces
-    more than ``feature_angle`` apart, and not folded flat back: cosine >= -0.98)."""
-    pairs, edge = face_adjacency(F)
-    E, _ = edges(F)
+def _creases(
+    V: np.ndarray, F: np.ndarray, feature_angle: float, edge_index: tuple
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pairs of faces sharing an edge, their edge, and whether pymeshlab takes it for sharp
+    (normals of the two faces more than ``feature_angle`` apart, and not folded flat back:
+    cosine >= -0.98). ``edge_index`` is ``edges(F)``."""
+    pairs, edge = face_adjacency(F, edge_index=edge_index)
     N = face_normals(V, F)
     cos = (N[pairs[:, 0]] * N[pairs[:, 1]]).sum(axis=1)
-    crease = (cos <= np.cos(np.radians(feature_angle))) & (cos >= -0.98)
-    return np.bincount(E[np.unique(edge[crease])].ravel(), minlength=len(V))
+    return pairs, edge, (cos <= np.cos(np.radians(feature_angle))) & (cos >= -0.98)
+
+
+def _crease_edges_at(V: np.ndarray, F: np.ndarray, feature_angle: float) -> np.ndarray:
+    """Per vertex, how many of its edges pymeshlab takes for sharp (:func:`_creases`)."""
+    edge_index = edges(F)
+    _, edge, crease = _creases(V, F, feature_angle, edge_index)
+    return np.bincount(edge_index[0][np.unique(edge[crease])].ravel(), minlength=len(V))
 
 
 def _topology(F: np.ndarray) -> tuple[int, int, int]:

@@ -87,7 +87,7 @@ from .parameterize import (
 from .quality import ChartQuality, chart_quality
 from .refine import ANGLE_WEIGHT, SMALL_CHART_FACES, slim_refine
 from .segment import divide, divide_many, face_affinity
-from .unfold import EDGE_TOL, FLAT_TOL, developable, unroll_charts
+from .unfold import EDGE_TOL, developable, unroll_charts
 
 log = logging.getLogger(__name__)
 
@@ -998,18 +998,10 @@ def _bulk_charts(
     # split rounds were solved one by one for want of MAX_EXTEND spare vertices, most fine.)
     go = solver[cand] & manifold & (topo["loops"] >= 1) & ~planar_ok & ~(c_planar & ~disk)
     # Developable disks (a cylinder's side, a cone's): unrolled, the exact isometry, not solved.
-    # Only a disk's boundary vertices (2 V - F - 2 of them) may be bent: a chart with more bent
-    # vertices than that is not tested further (every chart of an organic surface).
     flat = go & disk
     if flat.any():
-        angles = np.bincount(Fu.ravel(), weights=corner_angles(Vu, Fu).ravel(), minlength=len(Vu))
-        bent = np.abs(2 * np.pi - angles) > FLAT_TOL
-        n_bent = np.bincount(vert_chart, weights=bent, minlength=len(cand))
-        flat &= n_bent <= 2 * np.bincount(vert_chart, minlength=len(cand)) - nf[cand] - 2
+        flat &= developable(Vu, Fu, vert_chart, len(cand), euler=1)
     flat = np.flatnonzero(flat)
-    if len(flat):
-        Vd, Fd, vd = part(flat)
-        flat = flat[developable(Vd, Fd, vd, len(flat))]
     if len(flat):
         Vd, Fd, vd = part(flat)
         uv, error = unroll_charts(Vd, Fd, vd, len(flat))
@@ -1392,7 +1384,8 @@ def _developable_piece(V: np.ndarray, F: np.ndarray, faces: np.ndarray) -> bool:
     than go to the solver: developable (:func:`segparam.unfold.developable`), a strip one
     triangle wide included (a hole's wall; a strip of a curved surface is small work anyway).
     An estimate of the work, for dealing the pieces out only."""
-    return bool(developable(V, F[faces], np.zeros(len(V), dtype=np.int64), 1, strips=True)[0])
+    one = np.zeros(len(V), dtype=np.int64)
+    return bool(developable(V, F[faces], one, 1, strips=True, euler=0)[0])  # a disk or a tube
 
 
 def _try_all(tasks: list[tuple], *, cfg: SplitConfig, seed: int) -> list:
@@ -1481,9 +1474,7 @@ def _unrolled(
     (the solver maps it). ``tube``: the piece is a tube cut open, developable even without
     inner vertices (``developable(..., strips=True)``)."""
     vert_chart = np.zeros(len(V), dtype=np.int64)
-    if _bent_vertices(V, F) > 2 * len(V) - len(F) - 2:  # more than a disk's boundary has
-        return None
-    if not developable(V, F, vert_chart, 1, strips=tube)[0]:
+    if not developable(V, F, vert_chart, 1, strips=tube, euler=1)[0]:
         return None
     uv, error = unroll_charts(V, F, vert_chart, 1)
     if not error[0] <= EDGE_TOL:
@@ -1491,15 +1482,6 @@ def _unrolled(
     uv = uv - uv.min(axis=0)
     q = charts_quality(V, F, uv, vert_chart, 1)
     return (uv, quality_records(q)[0]) if q["bijective"][0] else None
-
-
-def _bent_vertices(V: np.ndarray, F: np.ndarray) -> int:
-    """How many vertices' angles do not sum to a full turn (within ``FLAT_TOL``): on a
-    developable disk only its boundary's, ``2 V - F - 2`` of them at most, may; every vertex of
-    a chart of an organic surface does (the screen before :func:`segparam.unfold.developable`,
-    which finds the boundary)."""
-    angles = np.bincount(F.ravel(), weights=corner_angles(V, F).ravel(), minlength=len(V))
-    return int(np.count_nonzero(np.abs(2 * np.pi - angles) > FLAT_TOL))
 
 
 def _solved(V: np.ndarray, F: np.ndarray, n_faces: int, cfg: SplitConfig, seed: int):

@@ -40,7 +40,13 @@ EDGE_TOL = 1e-7
 
 
 def developable(
-    V: np.ndarray, F: np.ndarray, vert_chart: np.ndarray, n_charts: int, *, strips: bool = False
+    V: np.ndarray,
+    F: np.ndarray,
+    vert_chart: np.ndarray,
+    n_charts: int,
+    *,
+    strips: bool = False,
+    euler: int | None = None,
 ) -> np.ndarray:
     """Per chart of a disjoint union (``vert_chart``: each vertex's chart), whether it has
     interior vertices and every one of them has an angle defect within `FLAT_TOL` (boundary
@@ -54,13 +60,28 @@ def developable(
     ``strips=True`` takes them as developable: for a tube cut open, which the split stage
     already found to be a wall (its loops turn as a cylinder's do), such as a drilled hole's
     wall in a CAD plate, one quad high.
+
+    ``euler``, the least Euler characteristic the charts can have (1: disks; 0: disks or
+    annuli), screens them first: a manifold chart of V vertices and F faces has ``2 V - F - 2
+    chi`` boundary vertices, so one with more vertices off a full turn than that has a bent inner
+    vertex. That rules out every chart of an organic surface before the boundary pass (an edge
+    sort), which then covers only the charts left.
     """
     total = np.bincount(F.ravel(), weights=corner_angles(V, F).ravel(), minlength=len(V))
-    interior = np.bincount(F.ravel(), minlength=len(V)) > 0
-    interior[boundary_edges(F).ravel()] = False
-    bent = interior & (np.abs(2 * np.pi - total) > FLAT_TOL)
+    used = np.bincount(F.ravel(), minlength=len(V)) > 0
+    off = used & (np.abs(2 * np.pi - total) > FLAT_TOL)
+    left = np.ones(n_charts, dtype=bool)
+    if euler is not None:
+        n_v = np.bincount(vert_chart, weights=used, minlength=n_charts)
+        n_f = np.bincount(vert_chart[F[:, 0]], minlength=n_charts)
+        left = np.bincount(vert_chart, weights=off, minlength=n_charts) <= 2 * n_v - n_f - 2 * euler
+        if not left.any():
+            return left
+    interior = used.copy()
+    interior[boundary_edges(F[left[vert_chart[F[:, 0]]]]).ravel()] = False
     inner = np.bincount(vert_chart, weights=interior, minlength=n_charts)
-    return (np.bincount(vert_chart, weights=bent, minlength=n_charts) == 0) & (strips | (inner > 0))
+    flat = np.bincount(vert_chart, weights=interior & off, minlength=n_charts) == 0
+    return left & flat & (strips | (inner > 0))
 
 
 def unroll_charts(
