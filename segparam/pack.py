@@ -154,14 +154,18 @@ _MAX_TRIALS = 6
 #   on;
 _FULL = 0.006
 _SMOOTH_CHARTS = 100
-# - with fewer charts, a fit that fills the texture before any trial failed is followed by a
-#   trial this much larger instead of the bisection towards the area bound, which no layout
-#   reaches: the CAD plate's charts fill the texture at the first guess, and its search went
-#   6 -> 4 trials to the same layout (0.14 -> 0.09 s; session 12). The step is just inside
-#   `_SCALE_TOL`, so that a failure there ends the search at once: at twice `_SCALE_TOL` (until
-#   session 19) the plate's 12 charts failed at +1.2%, +0.6% and +0.3%, 4 trials for the first
-#   fit's layout, now 2; it is the only one of 27 chart sets to take this path (BENCHMARKS.md,
-#   section 0.1, session 19);
+# - with fewer charts, a fit that fills the texture is followed by a trial this much larger
+#   instead of the bisection towards the last failure (or the area bound), where greedy layouts
+#   of few charts rarely fit: the CAD plate's charts fill the texture at the first guess, and its
+#   search went 6 -> 4 trials to the same layout (0.14 -> 0.09 s; session 12). The step is just
+#   inside `_SCALE_TOL`, so that a failure there ends the search at once: at twice `_SCALE_TOL`
+#   (until session 19) the plate's 12 charts failed at +1.2%, +0.6% and +0.3%, 4 trials for the
+#   first fit's layout, now 2. Until session 21 the rule waited for a search without a failure;
+#   after one, the bone scan's 20 charts (pymeshlab's bone.ply) filled the texture at the third
+#   trial and failed at three bisections above it: on 46 captured sets (the quick meshes', the
+#   real meshes', CAD parts', 12 synthetic brains of 1k-10k faces) three take the path now
+#   (bone 6 -> 4 trials, fsaverage5 4 -> 3, a 1k brain 6 -> 3), every layout the same, and
+#   `bench_pack.py --no-atlas` the same (BENCHMARKS.md, section 0.1, session 21);
 _FULL_STEP = _SCALE_TOL * (1 - 1e-6)
 # - a rectangle trial that fails reports only the fraction of the area it placed: the next scale
 #   shrinks by its square root, by at least 3% and at most by half;
@@ -1127,7 +1131,7 @@ def pack_charts(
     hi = min(by_area, by_side)
     setup = _trial_setup(charts, cfg, hi)
     rules = setup[1]
-    lo, best, failed = 0.0, None, False
+    lo, best = 0.0, None
     s = _first_scale(charts, G, p, by_area, by_side)
     n_trials = 0
     with ThreadPoolExecutor(max_workers=min(len(rules), os.cpu_count() or 1)) as pool:
@@ -1137,13 +1141,13 @@ def pack_charts(
             if fits:
                 lo, best = s, placed
             else:
-                hi, failed = s, True
+                hi = s
             fills = fits and _fills_the_texture(need, G, p)
             full = fills and len(charts) >= _SMOOTH_CHARTS
             if best is not None and _search_done(lo, hi, n_trials, full):
                 break
             s = _next_scale(s, lo, hi, fits, fraction, need, G, p, len(charts) >= _MODEL_CHARTS)
-            if fills and not failed:
+            if fills:
                 s = min(s, lo * (1 + _FULL_STEP))
     if best is None:
         raise SolverError(

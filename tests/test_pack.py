@@ -451,6 +451,35 @@ def test_a_fit_that_fills_the_texture_is_followed_by_a_small_step(monkeypatch) -
     assert len(tried) == 2
 
 
+def test_a_fit_that_fills_the_texture_after_a_failure_is_followed_by_a_small_step(
+    monkeypatch,
+) -> None:
+    """The same small step after a search that has already failed (the bone scan's 20 charts:
+    the first guess overflows, the second fits loosely, the third fills the texture): the next
+    trial is ``_FULL_STEP`` above the filling fit, not the bisection towards the failed scale,
+    and its failure ends the search with the filling fit's layout: four trials, not six."""
+    from segparam import pack
+
+    tried = []
+    real = pack._trial_at_scale
+
+    def trial(pool, setup, charts, s, G, p, k):
+        tried.append(s)
+        if len(tried) == 1 or len(tried) > 3:
+            return None, 0.9, G + 100  # the first guess and every larger scale overflow
+        placed, _, _ = real(pool, setup, charts, s, G, p, k)
+        return placed, 1.0, (G - 60 if len(tried) == 2 else G)  # loose fit, then a filling one
+
+    monkeypatch.setattr(pack, "_trial_at_scale", trial)
+    uvs = [rotate(grid(3, 2)[0], 0.2 * i) for i in range(5)]
+    faces = [grid(3, 2)[1]] * 5
+    res = pack_charts(uvs, faces, [1.0] * 5, config=PackConfig(resolution=256))
+    assert tried[1] < tried[2] < tried[0]
+    assert tried[3] == pytest.approx(tried[2] * (1 + pack._FULL_STEP))
+    assert res.scale * 256 == tried[2]
+    assert len(tried) == 4
+
+
 def test_many_tiny_charts() -> None:
     rng = np.random.default_rng(3)
     uvs, faces, areas = [], [], []
