@@ -19,10 +19,16 @@ neighbourhoods then have to grow, and the solver gets worse. This module therefo
 Sharp features are edges (a dihedral angle above ``feature_angle``, which pymeshlab keeps) and
 vertices (:func:`sharp_vertices`: a cone tip, a cube corner, where the angle defect is large while
 every dihedral angle may be small: 500 triangles around a cone's tip meet at under a degree each,
-and pymeshlab's smoothing pulled such a tip down from z = 1 to 0.92). The faces around a sharp
-vertex are left out of the remeshing (pymeshlab's "remesh only selected faces"), so it stays where
-it is, unless three or more sharp edges meet there (a cube's corner), which pymeshlab keeps by
-itself; the result is checked for every sharp vertex.
+and pymeshlab's smoothing pulled such a tip down from z = 1 to 0.92). The faces around every
+sharp vertex are left out of the remeshing (pymeshlab's "remesh only selected faces"), so it
+stays where it is (also where three or more sharp edges meet, which pymeshlab does not always
+keep: on pymeshlab's bunny with holes one such vertex of the scan moved by 0.149); the result is
+checked for every sharp vertex.
+
+pymeshlab's remeshing first merges vertices at the same position, which undoes what cleaning did
+to a non-manifold input (a vertex where two fans of faces touch becomes one copy per fan, at the
+same point): the remeshed surface is then split again the way cleaning splits it
+(:func:`segparam.clean.clean`) before it is checked.
 
 References
 ----------
@@ -464,13 +470,6 @@ def _creases(
     return pairs, edge, (cos <= np.cos(np.radians(feature_angle))) & (cos >= -0.98)
 
 
-def _crease_edges_at(V: np.ndarray, F: np.ndarray, feature_angle: float) -> np.ndarray:
-    """Per vertex, how many of its edges pymeshlab takes for sharp (:func:`_creases`)."""
-    edge_index = edges(F)
-    _, edge, crease = _creases(V, F, feature_angle, edge_index)
-    return np.bincount(edge_index[0][np.unique(edge[crease])].ravel(), minlength=len(V))
-
-
 def _topology(F: np.ndarray) -> tuple[int, int, int]:
     count, _ = connected_components(F)
     return count, len(boundary_loops(F)), euler_characteristic(F)
@@ -528,6 +527,16 @@ def _run_pymeshlab(
     V2 = np.asarray(m.vertex_matrix(), dtype=np.float64)
     F2 = np.asarray(m.face_matrix(), dtype=np.int64)
     return _compact(V2, F2)
+
+
+def _resplit(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Non-manifold edges and vertices of pymeshlab's result split the way
+    :func:`segparam.clean.clean` splits an input's (its other repairs find nothing to do on a
+    remeshed surface; :func:`_validate` then checks the topology against the input's)."""
+    from .clean import clean
+
+    cleaned = clean(V, F, merge_tolerance=0.0, area_tolerance=0.0)
+    return cleaned.V, cleaned.F
 
 
 def _orient_like(V0: np.ndarray, F0: np.ndarray, V: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -665,12 +674,12 @@ def remesh(V, F=None, *, config: RemeshConfig | None = None) -> RemeshResult:
         area = face_areas(V, F).sum()
         raise InvalidMeshError(f"the mesh has total area {area:.3g}; it cannot be remeshed")
 
-    # Sharp vertices (cone tips, corners) stay. Where three or more sharp edges meet (a cube's
-    # corner) pymeshlab keeps the vertex itself; around the others (a cone's tip: no sharp edge)
-    # the faces are left out of the remeshing.
+    # Sharp vertices (cone tips, corners) stay: the faces around them are left out of the
+    # remeshing. (pymeshlab keeps a vertex where three or more sharp edges meet, a cube's corner,
+    # by itself, but not always: one on pymeshlab's bunny with holes moved by 0.149, and the
+    # remeshing, 0.8 s, was thrown away.)
     sharp = sharp_vertices(V, F, config.feature_angle)
-    pinned = sharp[_crease_edges_at(V, F, config.feature_angle)[sharp] < 3] if len(sharp) else sharp
-    frozen = np.isin(F, pinned).any(axis=1) if len(pinned) else None
+    frozen = np.isin(F, sharp).any(axis=1) if len(sharp) else None
     if len(sharp):
         reason = f"{reason}; {len(sharp)} sharp vertices kept in place"
     if frozen is not None and frozen.all():
@@ -678,6 +687,10 @@ def remesh(V, F=None, *, config: RemeshConfig | None = None) -> RemeshResult:
 
     t0 = time.perf_counter()
     V2, F2 = _run_pymeshlab(V, F, target, config, frozen)
+    if not (is_edge_manifold(F2) and is_vertex_manifold(F2, len(V2)).all()):
+        # pymeshlab merged vertices at the same position: split them again as cleaning did
+        # (pymeshlab's cow: the input's one non-manifold vertex, two copies after cleaning)
+        V2, F2 = _resplit(V2, F2)
     V2, F2, problem = _validate(V, F, V2, F2, target, sharp)
     seconds = time.perf_counter() - t0
     if problem:
