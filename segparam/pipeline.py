@@ -24,6 +24,7 @@ import numpy as np
 from . import __version__, warmup
 from .clean import CleanResult, clean
 from .errors import ConfigError, InvalidMeshError
+from .instances import Repeats, candidates, expand_labels, find_repeats, replicate
 from .mesh import boundary_edges, face_areas, mesh_arrays, unit_frame
 from .pack import MAX_RESOLUTION, PackConfig, PackResult, pack_charts
 from .quality import distortion, signed_areas
@@ -367,6 +368,7 @@ def build_report(atlas: Atlas) -> dict[str, Any]:
             else atlas.segmentation.target_charts,
             "curvature": None if atlas.segmentation is None else atlas.segmentation.curvature,
             "first_pass_bijective": int(atlas.charts.first_pass_bijective.sum()),
+            "copies": 0 if atlas.segmentation is None else atlas.segmentation.copies,
         },
         "atlas": {
             "charts": atlas.n_charts,
@@ -665,22 +667,89 @@ def _chart_stages(
 
     with _timed(timings, "segment"):
         seg = segment(Vm, Fm, config=cfg.segment, seed=seed)
+        # pieces that are copies of another are charted as that one is (segparam.instances)
+        repeats = find_repeats(Vm, Fm) if cleaned.components > 1 else None
     report("segment", 1, 1)
     _check_room(seg.n_charts, cfg.pack, "the segmentation made")  # splitting only adds charts
 
     with _timed(timings, "parameterize"):
-        chart_set = parameterize_charts(
-            Vm,
-            Fm,
-            seg.labels,
-            config=cfg.split,
-            seed=seed,
-            progress=lambda done: report("parameterize", done, seg.n_charts),
-            affinity=seg.affinity,
-            workers=workers,
-        )
+        if repeats is None:
+            chart_set = parameterize_charts(
+                Vm,
+                Fm,
+                seg.labels,
+                config=cfg.split,
+                seed=seed,
+                progress=lambda done: report("parameterize", done, seg.n_charts),
+                affinity=seg.affinity,
+                workers=workers,
+            )
+        else:
+            chart_set, seg = _parameterize_once(Vm, Fm, seg, repeats, cfg, seed, report, workers)
     seg = dataclasses.replace(seg, affinity=None)  # an (m, m) matrix the atlas need not keep
     return _Charted(Vm, Fm, chart_set, timings, seg, cleaned, remeshed)
+
+
+def _parameterize_once(
+    V: np.ndarray,
+    F: np.ndarray,
+    seg: Segmentation,
+    repeats: Repeats,
+    cfg: PipelineConfig,
+    seed: int,
+    report: Callable[[str, int, int], None],
+    workers,
+) -> tuple[ChartSet, Segmentation]:
+    """:func:`segparam.split.parameterize_charts` of a mesh whose pieces repeat: every piece of
+    no group, and a few of each group (:func:`segparam.instances.candidates`), in one call; the
+    candidate whose charts distort least (area-weighted ``(L2^2 - 1) + (angle - 1)``) is copied
+    to the other pieces of its group (:func:`segparam.instances.replicate`). Returns the chart
+    set of the whole mesh and the segmentation with every piece cut as its group's choice."""
+    tried = candidates(seg.labels, repeats)
+    solve = np.ones(len(F), dtype=bool)
+    for faces, rows in zip(repeats.faces, tried, strict=True):  # loop over groups
+        solve[np.delete(faces, rows, axis=0).ravel()] = False
+    solved = np.flatnonzero(solve)
+    used = np.unique(F[solved])
+    to_sub = np.full(len(V), -1, dtype=np.int64)
+    to_sub[used] = np.arange(len(used))
+    sources, sub_labels = np.unique(seg.labels[solved], return_inverse=True)
+    part = parameterize_charts(
+        V[used],
+        to_sub[F[solved]],
+        sub_labels.reshape(-1),
+        config=cfg.split,
+        seed=seed,
+        progress=lambda done: report("parameterize", done, len(sources)),
+        affinity=None if seg.affinity is None else seg.affinity[solved][:, solved],
+        workers=workers,
+    )
+    charts = [
+        dataclasses.replace(c, faces=solved[c.faces], vertices=used[c.vertices])
+        for c in part.charts
+    ]
+    # per group, the candidate whose charts distort least (ties: the first)
+    area = face_areas(V, F)
+    excess = np.zeros(len(F))  # per face: its chart's (L2^2 - 1) + (angle - 1)
+    for c in charts:  # loop over charts
+        excess[c.faces] = (c.quality.l2_stretch**2 - 1) + (c.quality.angle_distortion - 1)
+    chosen = []
+    for faces, rows in zip(repeats.faces, tried, strict=True):  # loop over groups
+        cost = (excess[faces[rows]] * area[faces[rows]]).sum(axis=1) / area[faces[rows]].sum(1)
+        chosen.append(int(rows[np.argmin(cost)]))
+    labels = expand_labels(seg.labels, repeats, chosen)
+    charts = [dataclasses.replace(c, source=int(labels[c.faces[0]])) for c in charts]
+    charts = replicate(charts, repeats, chosen, len(F), len(V), labels)
+    n = int(labels.max()) + 1
+    first = np.zeros(n, dtype=bool)
+    first[labels[solved]] = part.first_pass_bijective[sub_labels.reshape(-1)]
+    for faces, c in zip(repeats.faces, chosen, strict=True):  # loop over groups
+        first[labels[faces]] = first[labels[faces[c]]][None, :]
+    splits = np.bincount([c.source for c in charts], minlength=n) - 1
+    chart_set = ChartSet(charts=tuple(charts), splits=splits, first_pass_bijective=first)
+    copies = repeats.n_pieces - len(repeats.faces)
+    log.info("instances: %d pieces charted as copies of %d parts", copies, len(repeats.faces))
+    return chart_set, dataclasses.replace(seg, labels=labels, n_charts=n, copies=copies)
 
 
 @contextlib.contextmanager

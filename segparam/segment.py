@@ -215,6 +215,9 @@ class Segmentation:
         splits follow the same creases and the mesh's affinity is not built twice (1.3 s of
         the 1M-face brain's 36 s); :func:`segparam.pipeline.build_atlas` drops it once the
         charts are mapped.
+    copies : int
+        Pieces of the mesh cut and mapped as copies of another piece (:mod:`segparam.instances`:
+        set by :func:`segparam.pipeline.build_atlas`; 0 from :func:`segment`).
     """
 
     labels: np.ndarray
@@ -222,6 +225,7 @@ class Segmentation:
     target_charts: int
     curvature: float
     affinity: sp.csr_matrix | None = field(default=None, repr=False, compare=False)
+    copies: int = 0
 
 
 def face_affinity(
