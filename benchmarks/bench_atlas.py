@@ -33,6 +33,10 @@ quick (up to ~36k faces)
     24,000 faces): radii uniform in [0.3, 1.0], centres uniform in [0, 20]^3
     (``default_rng(0)``: radii first, then centres). Spheres may intersect; they share no
     vertex.
+``spheres-300-jitter``
+    The same spheres, every vertex moved by N(0, 0.01 radius) per coordinate
+    (``default_rng(0)`` after the centres): no sphere is a copy of another, so each is cut and
+    mapped on its own (``spheres-300``'s are copies, mapped once: ``segparam.instances``).
 ``wavy-sheet``
     A scan-like open sheet: a 200 x 100 jittered grid with a wavy height field plus noise and
     four holes (36020 faces).
@@ -246,8 +250,9 @@ def disjoint_triangles(n: int = 2000, seed: int = 0) -> tuple[np.ndarray, np.nda
     return corners.reshape(-1, 3), np.arange(3 * n, dtype=np.int64).reshape(-1, 3)
 
 
-def many_spheres(n: int = 300, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """n closed icospheres (subdivision 1, 80 faces): radii in [0.3, 1], centres in [0, 20]^3."""
+def many_spheres(n: int = 300, seed: int = 0, jitter: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """n closed icospheres (subdivision 1, 80 faces): radii in [0.3, 1], centres in [0, 20]^3;
+    with ``jitter``, every vertex moved by N(0, jitter * radius) per coordinate (then drawn)."""
     import trimesh
 
     ico = trimesh.creation.icosphere(subdivisions=1)
@@ -257,6 +262,8 @@ def many_spheres(n: int = 300, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     radii = rng.uniform(0.3, 1.0, n)
     centres = rng.uniform(0.0, 20.0, (n, 3))
     V = centres[:, None, :] + radii[:, None, None] * P[None]
+    if jitter:
+        V = V + rng.normal(0.0, jitter, V.shape) * radii[:, None, None]
     F = T[None] + len(P) * np.arange(n, dtype=np.int64)[:, None, None]
     return V.reshape(-1, 3), F.reshape(-1, 3)
 
@@ -325,6 +332,7 @@ MESHES: dict[str, tuple[str, Callable[[], tuple[np.ndarray, np.ndarray]]]] = {
     "plate-holes": ("quick", plate_with_holes),
     "brain-20k": ("quick", lambda: brain_like_surface(20_000)),
     "spheres-300": ("quick", lambda: many_spheres(300)),
+    "spheres-300-jitter": ("quick", lambda: many_spheres(300, jitter=0.01)),
     "wavy-sheet": ("quick", wavy_sheet),
     "bone-scan": ("quick", lambda: pymeshlab_sample("bone-scan")),
     "cow": ("quick", lambda: pymeshlab_sample("cow")),
@@ -512,7 +520,7 @@ COLS = (
 )
 
 
-NAME_W = 16
+NAME_W = 18
 
 
 def show_header() -> None:
