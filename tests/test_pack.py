@@ -525,15 +525,25 @@ def test_many_charts_start_the_scale_search_near_its_answer(monkeypatch) -> None
 def test_after_a_failed_trial_many_charts_aim_at_the_full_window() -> None:
     """Before any layout fitted, a failed raster trial's secant step is aimed at ``_AIM`` of the
     texture's side (the middle of the "full" stop's window) with ``_MODEL_CHARTS`` charts or
-    more, just under the failed scale at most; with fewer charts it stays 3% under it."""
+    more, just under the failed scale at most; with fewer charts too after a near miss (at
+    most ``_NEAR_MISS`` over the side), else it stays 3% under the failed scale."""
     from segparam import pack
 
     G, p, s = 1024, 2, 64.0
-    need = 1034  # the height the failed trial needed, border included
-    aimed = pack._next_scale(s, 0.0, s, False, 1.0, need, G, p, many=True)
-    assert aimed == pytest.approx(s * np.sqrt(pack._AIM * (G - 2 * p) / (need - 2 * p)))
+    far = 1070  # the height the failed trial needed, border included: 4.5% over the side
+    aimed = pack._next_scale(s, 0.0, s, False, 1.0, far, G, p, many=True)
+    assert aimed == pytest.approx(s * np.sqrt(pack._AIM * (G - 2 * p) / (far - 2 * p)))
     assert pack._UNDER_FAILED * s < aimed < s
-    assert pack._next_scale(s, 0.0, s, False, 1.0, need, G, p) == pytest.approx(
+    assert pack._next_scale(s, 0.0, s, False, 1.0, far, G, p) == pytest.approx(
+        pack._UNDER_FAILED * s
+    )
+    near = 1034  # 1% over: few charts aim too (a 3% step would land on a loose fit)
+    for many in (True, False):
+        aimed = pack._next_scale(s, 0.0, s, False, 1.0, near, G, p, many=many)
+        assert aimed == pytest.approx(s * np.sqrt(pack._AIM * (G - 2 * p) / (near - 2 * p)))
+    edge = 2 * p + int((1 + pack._NEAR_MISS) * (G - 2 * p))  # the last height that is near
+    assert pack._next_scale(s, 0.0, s, False, 1.0, edge, G, p) > pack._UNDER_FAILED * s
+    assert pack._next_scale(s, 0.0, s, False, 1.0, edge + 1, G, p) == pytest.approx(
         pack._UNDER_FAILED * s
     )
     # a failure by a hair: the aimed step still moves down, by half the scale tolerance
