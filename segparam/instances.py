@@ -34,7 +34,15 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components as _cc
 
-__all__ = ["MATCH_TOL", "Repeats", "candidates", "expand_labels", "find_repeats", "replicate"]
+__all__ = [
+    "MATCH_TOL",
+    "Repeats",
+    "candidates",
+    "expand_labels",
+    "find_repeats",
+    "replicate",
+    "similarity",
+]
 
 #: Largest distance of a copy's vertex from the original's image under the best similarity,
 #: in RMS radii of the piece: copies made by moving a part (float32 exports: ~1e-7 of the
@@ -77,6 +85,23 @@ class Repeats:
     @property
     def n_pieces(self) -> int:
         return int(sum(len(f) for f in self.faces))
+
+
+def similarity(P: np.ndarray, Q: np.ndarray) -> float | None:
+    """``Q``'s size over ``P``'s when the points ``Q`` are the points ``P`` (row for row) moved
+    by one rotation, uniform scale and translation to `MATCH_TOL` of their RMS radius, else
+    None (also for a mirror image, or points all at one place)."""
+    P = np.asarray(P, dtype=np.float64)
+    Q = np.asarray(Q, dtype=np.float64)
+    if P.shape != Q.shape or P.ndim != 2 or P.shape[1] != 3 or len(P) == 0:
+        return None
+    P, Q = P - P.mean(axis=0), Q - Q.mean(axis=0)
+    rp, rq = np.sqrt((P**2).sum(axis=1).mean()), np.sqrt((Q**2).sum(axis=1).mean())
+    if not (rp > 0 and rq > 0):
+        return None
+    groups = _aligned(np.stack([P / rp, Q / rq]), np.array([rp, rq]), np.zeros(2), np.zeros(2),
+                      np.zeros(2))  # fmt: skip
+    return float(rq / rp) if groups else None
 
 
 def _pieces(F: np.ndarray, n: int) -> tuple[int, np.ndarray]:

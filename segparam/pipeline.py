@@ -24,7 +24,14 @@ import numpy as np
 from . import __version__, warmup
 from .clean import CleanResult, clean
 from .errors import ConfigError, InvalidMeshError
-from .instances import Repeats, candidates, expand_labels, find_repeats, replicate
+from .instances import (
+    Repeats,
+    candidates,
+    expand_labels,
+    find_repeats,
+    replicate,
+    similarity,
+)
 from .mesh import boundary_edges, face_areas, mesh_arrays, unit_frame
 from .pack import MAX_RESOLUTION, PackConfig, PackResult, pack_charts
 from .quality import distortion, signed_areas
@@ -543,15 +550,19 @@ def build_atlases(
     if len(names) != len(meshes):
         raise ConfigError(f"{len(names)} names for {len(meshes)} meshes")
     report = progress or (lambda stage, done, total: None)
-    charted = []
+    charted: list[_Charted] = []
+    inputs: list[tuple[np.ndarray, np.ndarray] | None] = []  # meshes a later one may copy
     for name, mesh in zip(names, meshes, strict=True):  # loop over meshes
         pair = (mesh, None) if hasattr(mesh, "faces") else tuple(mesh)
         if len(pair) != 2:
             raise InvalidMeshError(f"{name}: expected a (V, F) pair or a trimesh.Trimesh")
         try:
-            charted.append(_chart_mesh(*pair, cfg, seed, report))
+            copied = _chart_as_copy(pair, charted, inputs, names)
+            charted.append(copied or _chart_mesh(*pair, cfg, seed, report))
         except (InvalidMeshError, ConfigError) as exc:
             raise type(exc)(f"{name}: {exc}") from None
+        kept = copied is None and not charted[-1].remeshing.remeshed
+        inputs.append(_input_arrays(pair) if kept else None)
     sets = [c.charts.charts for c in charted]
     total = sum(len(s) for s in sets)
     _check_room(total, cfg.pack, "the meshes have")
@@ -596,6 +607,50 @@ def build_atlases(
         )
         start = stop
     return MultiAtlas(atlases=tuple(atlases), packing=packing, names=tuple(names))
+
+
+def _input_arrays(pair) -> tuple[np.ndarray, np.ndarray] | None:
+    """A mesh's (V, F) as float64 / int64 arrays, or None when they are not such arrays (the
+    stages then say what is wrong)."""
+    try:
+        V, F = mesh_arrays(*pair)
+        return np.asarray(V, dtype=np.float64), np.asarray(F, dtype=np.int64)
+    except (TypeError, ValueError, InvalidMeshError):
+        return None
+
+
+def _chart_as_copy(pair, charted: list, inputs: list, names: Sequence[str]) -> _Charted | None:
+    """A mesh of :func:`build_atlases` charted as an earlier one, of which it is a copy: the
+    same faces, its vertices the earlier mesh's moved by one rotation, uniform scale and
+    translation (:func:`segparam.instances.similarity`), and cleaning leaving both alike (a
+    GLB scene's nodes that place one mesh several times). Its own cleaned vertices, the earlier
+    mesh's segmentation and charts, each map scaled by the size ratio. None when it is no copy
+    (or the earlier mesh was remeshed, which moved its vertices)."""
+    mine = _input_arrays(pair)
+    if mine is None:
+        return None
+    V, F = mine
+    for k, theirs in enumerate(inputs):  # loop over the meshes before it
+        if theirs is None or theirs[1].shape != F.shape or not np.array_equal(theirs[1], F):
+            continue
+        scale = similarity(theirs[0], V)
+        if scale is None:
+            continue
+        t0 = time.perf_counter()
+        cleaned = clean(V, F)
+        other = charted[k]
+        if cleaned.F.shape != other.F.shape or not np.array_equal(cleaned.F, other.F):
+            continue
+        charts = [dataclasses.replace(c, uv=c.uv * scale) for c in other.charts.charts]
+        chart_set = dataclasses.replace(other.charts, charts=tuple(charts))
+        reason = f"{other.remeshing.reason}; a copy of {names[k]}, charted as it is"
+        remeshed = dataclasses.replace(other.remeshing, V=cleaned.V, F=cleaned.F, reason=reason)
+        log.info("%s: a copy of %s (scale %.6g), charted as it is", names[len(charted)],
+                 names[k], scale)  # fmt: skip
+        timings = {"clean": time.perf_counter() - t0}
+        return _Charted(cleaned.V, cleaned.F, chart_set, timings, other.segmentation, cleaned,
+                        remeshed)  # fmt: skip
+    return None
 
 
 @dataclass(frozen=True)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
@@ -151,3 +152,45 @@ def test_the_solver_sees_a_few_copies_only(monkeypatch):
 def test_clean_counts_pieces_for_the_early_exit():
     V, F = bumpy_part()
     assert clean(*union([(V, F), (placed(V, 1), F)])).components == 2
+
+
+def test_meshes_that_copy_an_earlier_one_are_charted_as_it_is(monkeypatch, tmp_path):
+    """build_atlases (a GLB scene's nodes placing one mesh several times): a mesh with the same
+    faces as an earlier one and its vertices moved, turned and scaled is charted as that one,
+    in its own coordinates, exactly as given."""
+    import segparam.pipeline as pipeline
+    from segparam.pipeline import build_atlases
+
+    calls = []
+    real = pipeline._chart_mesh
+
+    def spy(*args, **kw):
+        calls.append(1)
+        return real(*args, **kw)
+
+    monkeypatch.setattr(pipeline, "_chart_mesh", spy)
+    V, F = bumpy_part()
+    W = placed(V, 2, scale=2.0)
+    B = bumpy_part(seed=5)
+    cfg = PipelineConfig().replace(pack={"resolution": 256}, remesh={"mode": "off"})
+    multi = build_atlases([(V, F), (W, F), B], cfg, names=["a", "b", "c"])
+    assert len(calls) == 2  # a and c; b is a copy of a
+    a, b, c = multi.atlases
+    assert len(b.charts.charts) == len(a.charts.charts)
+    np.testing.assert_array_equal(b.V, W)  # its own vertices, bit for bit
+    assert "a copy of a" in b.remeshing.reason
+    for x, y in zip(a.charts.charts, b.charts.charts, strict=True):
+        np.testing.assert_allclose(y.uv, 2.0 * x.uv)
+    # one texture: no flips, every chart's footprint apart from every other's
+    uvs, tris = [], []
+    for atlas in multi.atlases:
+        assert (signed_areas(atlas.uv, atlas.uv_F) > 0).all()
+        for ch in atlas.charts.charts:
+            uvs.append(atlas.uv[atlas.uv_F[ch.faces]].reshape(-1, 2))
+            tris.append(np.arange(3 * len(ch.faces)).reshape(-1, 3))
+    assert footprint_conflicts(uvs, tris, resolution=256, padding=0) == 0
+    # b's texels per unit of length are a's: twice the size, four times the uv area
+    area = [np.abs(signed_areas(m.uv, m.uv_F)).sum() for m in (a, b)]
+    assert area[1] == pytest.approx(4 * area[0], rel=1e-6)
+    multi.save(tmp_path / "out")
+    assert (tmp_path / "out" / "b.obj").is_file()
