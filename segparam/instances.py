@@ -31,8 +31,8 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components as _cc
+
+from .mesh import connected_components
 
 __all__ = [
     "MATCH_TOL",
@@ -104,15 +104,6 @@ def similarity(P: np.ndarray, Q: np.ndarray) -> float | None:
     return float(rq / rp) if groups else None
 
 
-def _pieces(F: np.ndarray, n: int) -> tuple[int, np.ndarray]:
-    """Vertex-connected pieces: (count, piece of every face)."""
-    rows = np.repeat(F[:, 0], 2)
-    cols = F[:, 1:].ravel()
-    G = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
-    count, vlab = _cc(G, directed=False)
-    return int(count), vlab[F[:, 0]].astype(np.int64)
-
-
 def find_repeats(V: np.ndarray, F: np.ndarray) -> Repeats | None:
     """The pieces of ``(V, F)`` that are copies of another piece (see the module's notes), or
     None when no piece is.
@@ -128,7 +119,7 @@ def find_repeats(V: np.ndarray, F: np.ndarray) -> Repeats | None:
     """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
-    count, piece = _pieces(F, len(V))
+    count, piece = connected_components(F, by="vertex")  # pieces share no vertex
     if count < 2:
         return None
     order = np.argsort(piece, kind="stable")  # faces piece by piece, input order within

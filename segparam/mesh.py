@@ -587,10 +587,15 @@ def connected_components(F: np.ndarray, *, by: str = "edge") -> tuple[int, np.nd
         pairs, _ = face_adjacency(F)
         G = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(m, m))
     elif by == "vertex":
+        # faces sharing a vertex are joined through it: the components of the vertex graph of
+        # the faces' sides, each face labelled by its first corner's (numbered by first face)
         n = int(F.max()) + 1
-        rows = np.repeat(np.arange(m), 3)
-        incidence = sp.csr_matrix((np.ones(3 * m), (rows, F.ravel())), shape=(m, n))
-        G = incidence @ incidence.T
+        G = sp.coo_matrix((np.ones(2 * m), (np.repeat(F[:, 0], 2), F[:, 1:].ravel())), (n, n))
+        _, vlab = _cc(G, directed=False)
+        _, first, labels = np.unique(vlab[F[:, 0]], return_index=True, return_inverse=True)
+        rank = np.empty(len(first), dtype=np.int64)
+        rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+        return len(first), rank[labels.ravel()]
     else:
         raise ValueError(f"by must be 'edge' or 'vertex', got {by!r}")
     count, labels = _cc(G, directed=False)

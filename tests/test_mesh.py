@@ -408,3 +408,14 @@ def test_any_tube_cut_open_is_a_disk(n_around, n_along, r_top, seed):
     assert np.array_equal(src[F_cut], F)
     assert mesh.euler_characteristic(F_cut) == 1 and len(mesh.boundary_loops(F_cut)) == 1
     assert np.array_equal(np.bincount(src, minlength=len(V)) == 2, np.isin(np.arange(len(V)), cut))
+
+
+def test_vertex_components_join_faces_through_a_shared_vertex():
+    from segparam.mesh import connected_components
+
+    # a bow tie (two triangles touching at vertex 2), then a triangle apart, listed first
+    F = np.array([[5, 6, 7], [0, 1, 2], [2, 3, 4]])
+    assert connected_components(F, by="vertex")[0] == 2
+    np.testing.assert_array_equal(connected_components(F, by="vertex")[1], [0, 1, 1])
+    count, edge = connected_components(F, by="edge")  # no side shared: three
+    assert count == 3 and edge[1] != edge[2]
