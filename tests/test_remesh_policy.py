@@ -198,3 +198,20 @@ def test_sharp_vertices_where_creases_meet_are_frozen_too():
     sharp = sharp_vertices(V, F)
     moved, _ = cKDTree(res.V).query(V[sharp])
     assert len(sharp) > 100 and moved.max() < 1e-9
+
+
+def test_auto_leaves_planar_and_developable_regions_as_they_are():
+    """Under "auto" the faces the split stage maps exactly (planar or developable regions) are
+    not remeshed: a subdivided cone's base (planar slivers) comes back face for face while its
+    side (curved at the tip) is remeshed; "on" remeshes the base too."""
+    m = trimesh.creation.cone(radius=1.0, height=2.0, sections=48).subdivide().subdivide()
+    V, F = np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
+    on_base = np.abs(V[F][:, :, 2]).max(axis=1) < 1e-12
+    res = remesh(V, F, config=RemeshConfig(mode="auto"))
+    assert res.remeshed and "(planar, developable) kept" in res.reason
+    kept = np.abs(res.V[res.F][:, :, 2]).max(axis=1) < 1e-12
+    assert kept.sum() == on_base.sum()
+    moved, _ = cKDTree(res.V).query(V[np.unique(F[on_base])])
+    assert moved.max() < 1e-12
+    on = remesh(V, F, config=RemeshConfig(mode="on"))
+    assert (np.abs(on.V[on.F][:, :, 2]).max(axis=1) < 1e-12).sum() != on_base.sum()
