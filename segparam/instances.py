@@ -154,8 +154,9 @@ def find_repeats(V: np.ndarray, F: np.ndarray) -> Repeats | None:
         sig = np.round(np.linalg.norm(Q[:, :SIGNATURE_VERTICES], axis=2) / SIGNATURE_STEP).astype(
             np.int64
         )
-        key = np.c_[topo, sig]
-        _, cls = np.unique(key[ok], axis=0, return_inverse=True)
+        key = np.ascontiguousarray(np.c_[topo, sig][ok])
+        rows = key.view(np.dtype((np.void, key.itemsize * key.shape[1]))).ravel()
+        _, cls = np.unique(rows, return_inverse=True)  # equal rows (bytes): one class
         cls = cls.ravel()
         for c in np.flatnonzero(np.bincount(cls) >= 2):  # loop over candidate groups
             idx = np.flatnonzero(ok)[cls == c]
