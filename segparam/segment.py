@@ -495,6 +495,8 @@ def divide_many(
             (sub.data[keep], (sub.row[keep], sub.col[keep])), shape=(len(every), len(every))
         )
         _, comp = _cc(sub, directed=False)
+        # the groups in pieces, all at once (np.any per group: 16 ms for 1,200 sphere pieces)
+        apart = np.minimum.reduceat(comp, bounds[:-1]) != np.maximum.reduceat(comp, bounds[:-1])
         d = np.asarray(sub.sum(axis=1)).ravel()
         # each group's rows of `sub` hold its entries only: its dense block is read off them,
         # without a sparse slice per group (0.1 ms each; 600 sphere halves: 0.09 s)
@@ -503,7 +505,7 @@ def divide_many(
             for j, i in enumerate(small):  # loop over small groups: one dense eigh each
                 a, b = int(bounds[j]), int(bounds[j + 1])
                 faces, c = groups[i], comp[a:b]
-                if np.any(c != c[0]):  # components, numbered as connected_components numbers them
+                if apart[j]:  # components, numbered as connected_components numbers them
                     labels, first = np.unique(c, return_index=True)
                     out[i] = [faces[c == k] for k in labels[np.argsort(first)]]
                     continue
