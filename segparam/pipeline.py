@@ -32,7 +32,7 @@ from .instances import (
     replicate,
     similarity,
 )
-from .mesh import boundary_edges, face_areas, mesh_arrays, unit_frame
+from .mesh import boundary_edges, face_areas, mesh_arrays, submesh, unit_frame
 from .pack import MAX_RESOLUTION, PackConfig, PackResult, pack_charts
 from .quality import distortion, signed_areas
 from .remesh import RemeshConfig, RemeshResult, remesh
@@ -765,13 +765,11 @@ def _parameterize_once(
     for faces, rows in zip(repeats.faces, tried, strict=True):  # loop over groups
         solve[np.delete(faces, rows, axis=0).ravel()] = False
     solved = np.flatnonzero(solve)
-    used = np.unique(F[solved])
-    to_sub = np.full(len(V), -1, dtype=np.int64)
-    to_sub[used] = np.arange(len(used))
+    used, local_F = submesh(F, solved)
     sources, sub_labels = np.unique(seg.labels[solved], return_inverse=True)
     part = parameterize_charts(
         V[used],
-        to_sub[F[solved]],
+        local_F,
         sub_labels.reshape(-1),
         config=cfg.split,
         seed=seed,
