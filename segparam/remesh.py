@@ -698,7 +698,6 @@ def remesh(V, F=None, *, config: RemeshConfig | None = None) -> RemeshResult:
         frozen |= exact
     if frozen.all():
         return keep(f"{reason}: every face is kept, the input is kept")
-    frozen = frozen if frozen.any() else None
 
     t0 = time.perf_counter()
     V2, F2 = _run_pymeshlab(V, F, target, config, frozen)
