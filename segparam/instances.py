@@ -99,9 +99,7 @@ def similarity(P: np.ndarray, Q: np.ndarray) -> float | None:
     rp, rq = np.sqrt((P**2).sum(axis=1).mean()), np.sqrt((Q**2).sum(axis=1).mean())
     if not (rp > 0 and rq > 0):
         return None
-    groups = _aligned(np.stack([P / rp, Q / rq]), np.array([rp, rq]), np.zeros(2), np.zeros(2),
-                      np.zeros(2))  # fmt: skip
-    return float(rq / rp) if groups else None
+    return float(rq / rp) if _aligned(np.stack([P / rp, Q / rq])) else None
 
 
 def find_repeats(V: np.ndarray, F: np.ndarray) -> Repeats | None:
@@ -154,13 +152,12 @@ def find_repeats(V: np.ndarray, F: np.ndarray) -> Repeats | None:
         sig = np.round(np.linalg.norm(Q[:, :SIGNATURE_VERTICES], axis=2) / SIGNATURE_STEP).astype(
             np.int64
         )
-        key = np.ascontiguousarray(np.c_[topo, sig][ok])
-        rows = key.view(np.dtype((np.void, key.itemsize * key.shape[1]))).ravel()
-        _, cls = np.unique(rows, return_inverse=True)  # equal rows (bytes): one class
-        cls = cls.ravel()
+        cls = _row_classes(np.c_[topo, sig][ok])[1]
         for c in np.flatnonzero(np.bincount(cls) >= 2):  # loop over candidate groups
             idx = np.flatnonzero(ok)[cls == c]
-            groups.extend(_aligned(Q[idx], radius[idx], members[idx], fidx[idx], vidx[idx]))
+            for take in _aligned(Q[idx]):  # loop over its groups of copies
+                take = idx[take]
+                groups.append((fidx[take], vidx[take], radius[take] / radius[take[0]]))
     if not groups:
         return None
     return Repeats(
@@ -170,11 +167,22 @@ def find_repeats(V: np.ndarray, F: np.ndarray) -> Repeats | None:
     )
 
 
-def _aligned(Q, radius, members, fidx, vidx) -> list:
-    """Split candidates (normalized, centred vertices ``Q``) into groups of copies of their
-    first member: [(face rows, vertex rows, scale)], the original first, groups of two or more.
-    The first member left unmatched starts the next group (a loop that ends after one pass when
-    the candidates are copies, as they are unless a signature collides)."""
+def _row_classes(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The classes of equal rows of a 2-D integer array, as ``np.unique(a, axis=0,
+    return_index=True, return_inverse=True)`` finds them but with each row compared as its
+    bytes (a void view: 21 -> 6 ms on 300 rows of 248 numbers, where ``axis=0`` compares a
+    structured type field by field): (each class's first row, each row's class)."""
+    a = np.ascontiguousarray(a)
+    rows = a.view(np.dtype((np.void, a.itemsize * a.shape[1]))).ravel()
+    _, first, cls = np.unique(rows, return_index=True, return_inverse=True)
+    return first, cls.ravel()
+
+
+def _aligned(Q: np.ndarray) -> list[np.ndarray]:
+    """Split candidates (normalized, centred vertices ``Q``, one row of points each) into
+    groups of copies of their first member: the rows of each group of two or more, the
+    original first. The first member left unmatched starts the next group (a loop that ends
+    after one pass when the candidates are copies, as they are unless a signature collides)."""
     groups = []
     left = np.arange(len(Q))
     while len(left) >= 2:  # loop over groups within the candidates
@@ -189,9 +197,8 @@ def _aligned(Q, radius, members, fidx, vidx) -> list:
         err = np.abs(Q[left] @ R - ref[None]).max(axis=(1, 2))
         match = err <= MATCH_TOL
         match[0] = True
-        take = left[match]
-        if len(take) >= 2:
-            groups.append((fidx[take], vidx[take], radius[take] / radius[take[0]]))
+        if match.sum() >= 2:
+            groups.append(left[match])
         left = left[~match]
     return groups
 
@@ -205,8 +212,7 @@ def candidates(labels: np.ndarray, repeats: Repeats, most: int = CANDIDATES) -> 
     out = []
     for faces in repeats.faces:  # loop over groups
         pattern = np.array([np.unique(labels[f], return_inverse=True)[1].ravel() for f in faces])
-        _, first = np.unique(pattern, axis=0, return_index=True)
-        out.append(np.sort(first)[:most])
+        out.append(np.sort(_row_classes(pattern)[0])[:most])
     return out
 
 
