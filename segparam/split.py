@@ -1004,12 +1004,7 @@ def _bulk_charts(
     flat = np.flatnonzero(flat)
     if len(flat):
         Vd, Fd, vd = part(flat)
-        uv, error = unroll_charts(Vd, Fd, vd, len(flat))
-        unrolled = error <= EDGE_TOL
-        uv[~unrolled[vd]] = 0.0  # not measured as maps: NaN where a chart was not reached
-        uv -= np.minimum.reduceat(uv, np.searchsorted(vd, np.arange(len(flat))))[vd]
-        q = charts_quality(Vd, Fd, uv, vd, len(flat))
-        kept = unrolled & q["bijective"]
+        uv, q, kept = _unroll_checked(Vd, Fd, vd, len(flat))
         emit(flat, vd, uv, q, kept, "developable")
         go[flat[kept]] = False
     holed = np.flatnonzero(go & (topo["loops"] >= 2))
@@ -1476,12 +1471,23 @@ def _unrolled(
     vert_chart = np.zeros(len(V), dtype=np.int64)
     if not developable(V, F, vert_chart, 1, strips=tube, euler=1)[0]:
         return None
-    uv, error = unroll_charts(V, F, vert_chart, 1)
-    if not error[0] <= EDGE_TOL:
-        return None
-    uv = uv - uv.min(axis=0)
-    q = charts_quality(V, F, uv, vert_chart, 1)
-    return (uv, quality_records(q)[0]) if q["bijective"][0] else None
+    uv, q, kept = _unroll_checked(V, F, vert_chart, 1)
+    return (uv, quality_records(q)[0]) if kept[0] else None
+
+
+def _unroll_checked(
+    V: np.ndarray, F: np.ndarray, vert_chart: np.ndarray, n: int
+) -> tuple[np.ndarray, dict, np.ndarray]:
+    """Every chart of a disjoint union unrolled (:func:`segparam.unfold.unroll_charts`), lower
+    corners at 0, and measured (``charts_quality``): (uv, quality, kept), kept where a chart
+    unrolled consistently (its sides within `EDGE_TOL`) and bijectively. The maps of the
+    others are not maps (0 where a vertex was not reached)."""
+    uv, error = unroll_charts(V, F, vert_chart, n)
+    unrolled = error <= EDGE_TOL
+    uv[~unrolled[vert_chart]] = 0.0  # NaN where a chart was not reached
+    uv -= np.minimum.reduceat(uv, np.searchsorted(vert_chart, np.arange(n)))[vert_chart]
+    q = charts_quality(V, F, uv, vert_chart, n)
+    return uv, q, unrolled & q["bijective"]
 
 
 def _solved(V: np.ndarray, F: np.ndarray, n_faces: int, cfg: SplitConfig, seed: int):
