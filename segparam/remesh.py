@@ -328,18 +328,27 @@ def auto_policy(
     remesh : bool
     reason : str
     """
+    return _auto_policy(V, F, quality, feature_angle)[:2]
+
+
+def _auto_policy(
+    V: np.ndarray, F: np.ndarray, quality: MeshQuality, feature_angle: float
+) -> tuple[bool, str, np.ndarray | None]:
+    """:func:`auto_policy`, and the :func:`exact_faces` it found (None when the triangles'
+    quality alone decided), which :func:`remesh` then leaves out of the remeshing."""
     go, reason = should_remesh(quality)
     if not go:
-        return go, reason
+        return go, reason, None
     exact = exact_faces(V, F, feature_angle)
     rest = _quality(V, F[~exact]) if exact.any() and not exact.all() else None
     if exact.all() or (rest is not None and not should_remesh(rest)[0]):
         others = "" if rest is None else f"; the other faces: {should_remesh(rest)[1]}"
-        return False, (
+        reason = (
             f"{reason}; but {100 * exact.mean():.0f}% of the faces lie in planar or developable "
             f"regions, mapped exactly whatever their shape{others}"
         )
-    return go, reason
+        return False, reason, exact
+    return go, reason, exact
 
 
 def exact_faces(V, F, feature_angle: float = 30.0) -> np.ndarray:
@@ -667,8 +676,9 @@ def remesh(V, F=None, *, config: RemeshConfig | None = None) -> RemeshResult:
 
     if config.mode == "off":
         return keep("remeshing is off")
+    exact = None  # the faces "auto" leaves as they are
     if config.mode == "auto":
-        go, reason = auto_policy(V, F, before, config.feature_angle)
+        go, reason, exact = _auto_policy(V, F, before, config.feature_angle)
         if not go:
             return keep(reason)
     else:
@@ -686,13 +696,12 @@ def remesh(V, F=None, *, config: RemeshConfig | None = None) -> RemeshResult:
     frozen = np.isin(F, sharp).any(axis=1) if len(sharp) else np.zeros(len(F), dtype=bool)
     if len(sharp):
         reason = f"{reason}; {len(sharp)} sharp vertices kept in place"
-    if config.mode == "auto":
+    if exact is not None:
         # Under "auto" the planar and developable regions between sharp edges are left as they
         # are too: the split stage maps them exactly whatever their triangles (projected or
         # unrolled), and remeshed they are curved to rounding and go to the solver (a cone of
         # 1,536 faces whose tip is a fan of slivers: 3 charts mapped exactly in 0.14 s as it is,
         # 6 solved charts in 0.42 s remeshed).
-        exact = exact_faces(V, F, config.feature_angle)
         if exact.any():
             reason = f"{reason}; {100 * exact.mean():.0f}% of the faces (planar, developable) kept"
         frozen |= exact
