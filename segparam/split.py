@@ -61,10 +61,12 @@ from .mesh import (
     boundary_pieces,
     check_mesh,
     corner_angles,
+    curvature_shares,
     cut_along,
     face_areas,
     face_normals,
     group_by_label,
+    inner_curvature,
     is_disk,
     label_topology,
     mesh_arrays,
@@ -109,6 +111,23 @@ STRETCH_MIN_FACES = SMALL_CHART_FACES
 #: a piece that a split would flatten little (the realistic 20k-face brain had a 7-face piece
 #: whose projection was bijective at L2 3.6, Linf 12; the refinement overlapped it: it is split).
 SMALL_CHART_MAX_STRETCH = 1.25
+#: A chart that holds this much Gaussian curvature of one sign (radians: its faces'
+#: :func:`segparam.mesh.curvature_shares`) is a cap no map meets ``max_stretch`` <=
+#: ``MAX_STRETCH`` on: it is cut before any solve (:func:`_caps`). On spherical caps the solver's
+#: L2 reaches 1.02 at 4.05-4.1 rad (icospheres subdivided 3-5 times: 4.13 rad 1.0207, 3.93 rad
+#: 1.0181) and 1.027 at 4.5. Of 1,900 pieces the split stage solved on 27 meshes (the quick
+#: set, the turned CAD parts, capsules, spheres, three realistic brains), the 626 caught by
+#: these three bounds all failed (600 of them the halves of the 300 jittered spheres: 0.24 s of
+#: their 0.64 s stage went to solving them); the pieces that passed with 4.5 rad or more were
+#: CAD walls whose curvature sits on their rims (a cylinder's, a cone's side), or noisy.
+CAP_CURVATURE = 4.5
+#: ... of which at least this much inside the chart, at its inner vertices (Gauss-Bonnet: what
+#: the boundary's turning cannot take up; a cylinder's side or a cone's holds none, its
+#: curvature is on the rim; the jittered spheres' halves hold 3.3-5 rad) ...
+CAP_INNER = 3.25
+#: ... and of one sign: the inner defects' sum at least this share of their absolute sum (a
+#: noisy scan's or a bunny's piece of 4-5 rad with saddles in it mapped within the targets).
+CAP_ONE_SIGN = 0.9
 #: Default ``SplitConfig.min_split_gain``: after the targets are met, a small chart is bisected
 #: once more (:func:`_split_for_gain`) when that lowers the atlas's distortion excess (atlas
 #: ``L2^2 - 1`` plus angle ``- 1``, :func:`_excess`) by at least this much per chart added, and
@@ -502,9 +521,11 @@ def parameterize_charts(
     ) as helpers:
         # Small charts, all at once: already in mesh indices and units.
         bulk_rejected, bulk_bijective = np.zeros(n_src, dtype=bool), np.zeros(n_src, dtype=bool)
+        curvature = curvature_shares(V, F) if _may_cap(cfg) else None
         final = _bulk_charts(
-            V, F, sub, order, bounds, cfg, size, bulk_rejected, bulk_bijective, helpers=helpers
-        )
+            V, F, sub, order, bounds, cfg, size, bulk_rejected, bulk_bijective, helpers=helpers,
+            curvature=curvature,
+        )  # fmt: skip
         if progress is not None and final:
             progress(len(final))
         in_bulk = np.zeros(n_src, dtype=bool)
@@ -545,7 +566,7 @@ def parameterize_charts(
         else:
             results = _solve_in_rounds(
                 V, F, rest, sources, sub, affinity, cfg, seed, size, bulk_rejected, bulk_bijective,
-                progress, len(final), helpers,
+                progress, len(final), helpers, curvature=curvature,
             )  # fmt: skip
 
         for src in rest:
@@ -882,6 +903,7 @@ def _bulk_charts(
     *,
     helpers: Helpers | None = None,
     project_only: np.ndarray | None = None,
+    curvature: np.ndarray | None = None,
 ) -> dict[int, tuple[list[Chart], bool]]:
     """The small segmentation charts that map on their first try, mapped all at once.
 
@@ -900,7 +922,9 @@ def _bulk_charts(
       (what :func:`_opened` does alone); a tube of more loops is not tried.
 
     The charts ``project_only`` names (the split rounds' pieces past ``max_depth``) are taken as
-    small ones, whatever their size, as :func:`_try_piece` takes them.
+    small ones, whatever their size, as :func:`_try_piece` takes them. With ``curvature`` (each
+    mesh face's :func:`segparam.mesh.curvature_shares`), the disks that are caps (:func:`_caps`)
+    are not solved but rejected.
 
     A chart that fails any of these is not in the result: the per-chart path maps or splits it,
     as before. Where :func:`_try_piece` could only fail the same way (a small chart whose
@@ -1007,6 +1031,13 @@ def _bulk_charts(
         uv, q, kept = _unroll_checked(Vd, Fd, vd, len(flat))
         emit(flat, vd, uv, q, kept, "developable")
         go[flat[kept]] = False
+    one_loop = disk & (topo["loops"] == 1)
+    if curvature is not None and (go & one_loop).any():  # caps: cut without a solve
+        share = np.bincount(lab, weights=curvature[order], minlength=n_src)[cand]
+        capped = go & one_loop & _caps(Vu, Fu, vert_chart, len(cand), share, nf[cand], cfg)
+        go &= ~capped
+        if rejected is not None:
+            rejected[cand[capped]] = True
     holed = np.flatnonzero(go & (topo["loops"] >= 2))
     # Tubes are not solved as they are: one of two loops is cut open into a disk and solved with
     # the others (as _opened does alone), one of more loops is split.
@@ -1156,6 +1187,57 @@ def _stretch_limit(n_faces, cfg: SplitConfig):
     return np.where(small, max(cfg.max_stretch, SMALL_CHART_MAX_STRETCH), cfg.max_stretch)
 
 
+def _caps(
+    V: np.ndarray,
+    F: np.ndarray,
+    vert_chart: np.ndarray,
+    n_charts: int,
+    share: np.ndarray,
+    n_faces: np.ndarray,
+    cfg: SplitConfig,
+) -> np.ndarray:
+    """Per chart of a disjoint union (``vert_chart``: each vertex's chart), whether it is a cap
+    that will miss the stretch target (``CAP_CURVATURE``, ``CAP_INNER``, ``CAP_ONE_SIGN``): the
+    split stage cuts those without solving them. ``share``: each chart's curvature with its
+    border's share (:func:`segparam.mesh.curvature_shares` summed over its faces). Only under
+    a stretch target of at most ``MAX_STRETCH``, where the bounds were measured."""
+    limit = _stretch_limit(n_faces, cfg)
+    if limit is None:
+        return np.zeros(n_charts, dtype=bool)
+    net, absolute = inner_curvature(V, F, vert_chart, n_charts)
+    return (
+        (limit <= MAX_STRETCH)
+        & (share >= CAP_CURVATURE)
+        & (net >= CAP_INNER)
+        & (net >= CAP_ONE_SIGN * absolute)
+    )
+
+
+def _may_cap(cfg: SplitConfig) -> bool:
+    """Whether :func:`_caps` can find any cap under this config (a stretch target of at most
+    ``MAX_STRETCH``)."""
+    return cfg.max_stretch is not None and cfg.max_stretch <= MAX_STRETCH
+
+
+def _pieces_capped(
+    V: np.ndarray, F: np.ndarray, pieces: list[np.ndarray], curvature: np.ndarray, cfg: SplitConfig
+) -> np.ndarray:
+    """:func:`_caps` of disjoint pieces of the mesh (their mesh face indices), the ones that are
+    disks: the few pieces a split round solves alone."""
+    sizes = np.array([len(p) for p in pieces])
+    order, bounds = np.concatenate(pieces), np.r_[0, np.cumsum(sizes)]
+    labels = np.zeros(len(F), dtype=np.int64)
+    labels[order] = np.repeat(np.arange(len(pieces)), sizes)
+    vertices, Fu, vert_chart = _union(_submeshes(F, labels, order, bounds), np.arange(len(pieces)))
+    topo = label_topology(Fu, vert_chart[Fu[:, 0]], len(pieces))
+    disk = (
+        topo["edge_manifold"] & topo["vertex_manifold"] & (topo["components"] == 1)
+        & (topo["loops"] == 1) & (topo["euler"] == 1)
+    )  # fmt: skip
+    share = np.add.reduceat(curvature[order], bounds[:-1])
+    return disk & _caps(V[vertices], Fu, vert_chart, len(pieces), share, sizes, cfg)
+
+
 def _tubes(V: np.ndarray, F: np.ndarray, face_chart: np.ndarray, n_charts: int) -> np.ndarray:
     """Per chart of a disjoint union (every chart its own vertices): whether it has two or more
     boundary loops and each turns by less than ``TUBE_TURNING`` in total. Loops are the pieces
@@ -1208,6 +1290,7 @@ def _solve_in_rounds(
     done: int,
     helpers: Helpers | None = None,
     give_up: Callable[[dict], set] | None = None,
+    curvature: np.ndarray | None = None,
 ) -> dict[int, tuple[list[Chart], bool]]:
     """:func:`_solve_source` for every chart in `rest`, in one process, a split depth at a time.
 
@@ -1222,6 +1305,8 @@ def _solve_in_rounds(
     its depth-first bisection would emit them. ``give_up(so_far)``, after each round that leaves
     pieces to map (chart -> (its pieces so far, in mesh face indices, and how many are left)),
     names charts to drop: their pieces are not mapped further and they are not in the result.
+    With ``curvature`` (:func:`segparam.mesh.curvature_shares` of the mesh), the caps
+    (:func:`_caps`) among the pieces are bisected without a solve, in bulk or alone.
     """
     m = len(F)
     pos = np.empty(m, dtype=np.int64)  # each face's index in its chart's face list
@@ -1251,7 +1336,7 @@ def _solve_in_rounds(
             sub_b = _submeshes(F, labels, order, bounds)
             got = _bulk_charts(
                 V, F, sub_b, order, bounds, cfg, size, rejected, helpers=helpers,
-                project_only=deep,
+                project_only=deep, curvature=curvature,
             )  # fmt: skip
             mapped = {batch[i]: got[i][0][0] for i in got}
         rejected_at = {batch[i] for i in np.flatnonzero(rejected)}
@@ -1260,6 +1345,12 @@ def _solve_in_rounds(
             k for k, (*_, tried) in enumerate(pending)
             if k not in mapped and not (tried or k in rejected_at)
         ]  # fmt: skip
+        if curvature is not None and alone:  # the caps among them: cut without a solve
+            capped = _pieces_capped(
+                V, F, [sources[pending[k][0]][pending[k][1]] for k in alone], curvature, cfg
+            )
+            rejected_at |= {k for k, c in zip(alone, capped, strict=True) if c}
+            alone = [k for k, c in zip(alone, capped, strict=True) if not c]
         tasks = [(V[sub.of(src)[0]], sub.of(src)[1], faces, src, depth)
                  for src, faces, depth, *_ in (pending[k] for k in alone)]  # fmt: skip
         tried_alone = dict(zip(alone, _try_pieces(tasks, cfg, seed, helpers), strict=True))

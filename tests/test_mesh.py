@@ -419,3 +419,31 @@ def test_vertex_components_join_faces_through_a_shared_vertex():
     np.testing.assert_array_equal(connected_components(F, by="vertex")[1], [0, 1, 1])
     count, edge = connected_components(F, by="edge")  # no side shared: three
     assert count == 3 and edge[1] != edge[2]
+
+
+def test_curvature_shares_hold_the_curvature_of_every_region_whatever_the_mesh():
+    import trimesh
+
+    from segparam.mesh import curvature_shares, inner_curvature
+
+    for subdivisions in (1, 3):
+        m = trimesh.creation.icosphere(subdivisions)
+        V, F = np.asarray(m.vertices), np.asarray(m.faces)
+        share = curvature_shares(V, F)
+        assert share.sum() == pytest.approx(4 * np.pi)  # Gauss-Bonnet, closed genus 0
+        upper = V[F].mean(axis=1)[:, 2] > 0
+        # Half the sphere's faces hold about the solid angle they cover (Van Oosterom and
+        # Strackee's formula) even on 80 faces, where the half's inner vertices hold much less:
+        # the vertices of the cut are inner to the sphere but on the half's border.
+        a, b, c = V[F[upper]].transpose(1, 0, 2)
+        det = np.einsum("ij,ij->i", a, np.cross(b, c))
+        dots = 1 + (a * b).sum(1) + (b * c).sum(1) + (c * a).sum(1)
+        solid_angle = 2 * np.arctan2(det, dots).sum()
+        assert share[upper].sum() == pytest.approx(solid_angle, rel=0.1)
+        used = np.unique(F[upper])
+        remap = np.full(len(V), -1)
+        remap[used] = np.arange(len(used))
+        net, absolute = inner_curvature(V[used], remap[F[upper]], np.zeros(len(used), int), 1)
+        assert 0 < net[0] < share[upper].sum() and absolute[0] == pytest.approx(net[0])
+    V, F = tri_grid(6, 6)  # flat: its boundary turns, it holds no curvature
+    assert np.allclose(curvature_shares(V, F), 0, atol=1e-12)

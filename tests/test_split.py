@@ -225,7 +225,9 @@ def test_first_pass_counts_bijective_maps_split_for_a_target(cells):
     labels = np.minimum((C[:, 0] - C[:, 0].min()) / np.ptp(C[:, 0]) * cells, cells - 1)
     labels = labels.astype(np.int64)
     cfg = SplitConfig(max_stretch=1.0 + 1e-6)
-    loose = parameterize_charts(V, F, labels, config=SplitConfig(max_stretch=None))
+    loose = parameterize_charts(
+        V, F, labels, config=SplitConfig(max_stretch=None, min_split_gain=None)
+    )
     assert loose.first_pass_bijective.all() and not loose.splits.any()
     tight = parameterize_charts(V, F, labels, config=cfg)
     assert tight.splits.any()  # the target split charts the solver had mapped bijectively
@@ -469,3 +471,70 @@ def test_piece_vertex_counts_match_one_unique_per_piece():
         pieces.append(np.sort(rng.choice(n, int(rng.integers(1, n + 1)), replace=False)))
     want = [len(np.unique(sub.of(s)[1][f])) for s, f in zip(srcs, pieces, strict=True)]
     assert _piece_vertex_counts(sub, srcs, pieces).tolist() == want
+
+
+def _halves(subdivisions):
+    """An icosphere cut in two at its equator: the faces' labels by the sign of their z."""
+    m = trimesh.creation.icosphere(subdivisions)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    return V, F, (V[F].mean(axis=1)[:, 2] > 0).astype(np.int64)
+
+
+@pytest.mark.parametrize("subdivisions", [2, 4])  # solved in bulk (162 faces), alone (2,560)
+def test_caps_are_cut_without_a_solve_into_the_charts_a_solve_would_have_led_to(
+    monkeypatch, subdivisions
+):
+    # A hemisphere holds 2 pi of curvature, past any map within the stretch target: it is
+    # bisected at once, not solved first, and ends in the same charts as when it was solved.
+    import segparam.split as split
+
+    V, F, labels = _halves(subdivisions)
+    solved = []  # the face count of every piece solved, in bulk or alone
+    in_bulk, alone = split.solve_charts, split._solved
+
+    def record_bulk(V_, F_, vert_chart, **kw):
+        solved.extend(np.bincount(vert_chart[F_[:, 0]]).tolist())
+        return in_bulk(V_, F_, vert_chart, **kw)
+
+    def record_alone(V_, F_, *args):
+        solved.append(len(F_))
+        return alone(V_, F_, *args)
+
+    monkeypatch.setattr(split, "solve_charts", record_bulk)
+    monkeypatch.setattr(split, "_solved", record_alone)
+    one = SplitConfig(n_jobs=1)  # every solve in this process, where it is recorded
+    cs = parameterize_charts(V, F, labels, config=one)
+    check_chart_set(V, F, cs)
+    halves = np.bincount(labels).tolist()
+    assert solved and max(solved) < min(halves)  # only pieces of the halves were solved
+    assert (cs.splits >= 1).all() and not cs.first_pass_bijective.any()  # never tried
+
+    solved.clear()
+    monkeypatch.setattr(split, "CAP_CURVATURE", np.inf)  # no caps: the halves are solved first
+    plain = parameterize_charts(V, F, labels, config=one)
+    assert set(halves) <= set(solved) and plain.first_pass_bijective.all()
+    assert len(plain.charts) == len(cs.charts)
+    for a, b in zip(plain.charts, cs.charts, strict=True):
+        assert np.array_equal(a.faces, b.faces) and np.array_equal(a.uv, b.uv)
+
+
+def test_a_cap_within_reach_of_the_stretch_target_is_solved_whole():
+    # A 68-degree cap holds 3.9 rad: the solver maps it within L2 1.02 (1.018), so it is not
+    # taken for a cap; and without a stretch target no chart is ever a cap.
+    m = trimesh.creation.icosphere(4)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    cap = V[F].mean(axis=1)[:, 2] > np.cos(np.radians(68))
+    sub_V, sub_F = V, F[cap]
+    used = np.unique(sub_F)
+    remap = np.full(len(V), -1)
+    remap[used] = np.arange(len(used))
+    sub_V, sub_F = V[used], remap[sub_F]
+    cs = parameterize_charts(sub_V, sub_F, np.zeros(len(sub_F), dtype=np.int64))
+    assert len(cs.charts) == 1 and cs.first_pass_bijective[0]
+    assert cs.charts[0].quality.l2_stretch <= 1.02
+
+    V, F, labels = _halves(2)
+    loose = parameterize_charts(
+        V, F, labels, config=SplitConfig(max_stretch=None, min_split_gain=None)
+    )
+    assert len(loose.charts) == 2 and loose.first_pass_bijective.all()
