@@ -38,6 +38,7 @@ __all__ = [
     "genus",
     "group_by_label",
     "inner_curvature",
+    "interior_defect",
     "is_disk",
     "is_edge_manifold",
     "is_vertex_manifold",
@@ -378,7 +379,37 @@ def angle_defect(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     return np.where(used, full - total, 0.0)
 
 
-def curvature_shares(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+def interior_defect(
+    V: np.ndarray,
+    F: np.ndarray,
+    *,
+    angles: np.ndarray | None = None,
+    edge_index: tuple | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The angle defect ``2 pi - sum of angles`` at every interior vertex (0 on the boundary and
+    at unused vertices: a boundary's turning is not curvature), and every vertex's angle sum.
+    ``angles`` (:func:`corner_angles`) and ``edge_index`` (:func:`edges`) may be passed when the
+    caller has them.
+
+    Returns
+    -------
+    defect, total : (n,) float64 ndarrays
+    """
+    if angles is None:
+        angles = corner_angles(V, F)
+    total = np.bincount(F.ravel(), weights=angles.ravel(), minlength=len(V))
+    interior = np.bincount(F.ravel(), minlength=len(V)) > 0
+    interior[boundary_edges(F, edge_index=edge_index).ravel()] = False
+    return np.where(interior, 2 * np.pi - total, 0.0), total
+
+
+def curvature_shares(
+    V: np.ndarray,
+    F: np.ndarray,
+    *,
+    angles: np.ndarray | None = None,
+    defect: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
     """Each face's share of the Gaussian curvature: the angle defect of every interior vertex,
     dealt to its faces in proportion to their corner angles there (a boundary vertex's turning
     is not curvature: it deals nothing).
@@ -386,19 +417,18 @@ def curvature_shares(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     Summed over a region, the region's curvature with its border's share: a hemisphere cut from
     a sphere holds about ``2 pi`` however coarse the mesh, where the defects of the hemisphere's
     own inner vertices (:func:`inner_curvature`) miss what sits on the cut (an 80-face
-    icosphere's halves: 3.3-5 rad).
+    icosphere's halves: 3.3-5 rad). ``angles`` (:func:`corner_angles`) and ``defect``
+    (:func:`interior_defect`) may be passed when the caller has them.
 
     Returns
     -------
     (m,) float64 ndarray
     """
-    angles = corner_angles(V, F)
-    total = np.bincount(F.ravel(), weights=angles.ravel(), minlength=len(V))
-    interior = np.bincount(F.ravel(), minlength=len(V)) > 0
-    interior[boundary_edges(F).ravel()] = False
-    per_radian = np.zeros(len(V))
-    per_radian[interior] = (2 * np.pi - total[interior]) / total[interior]
-    return (per_radian[F] * angles).sum(axis=1)
+    if angles is None:
+        angles = corner_angles(V, F)
+    K, total = interior_defect(V, F, angles=angles) if defect is None else defect
+    per_radian = np.divide(K, total, out=np.zeros(len(V)), where=(K != 0) & (total > 0))
+    return np.einsum("ij,ij->i", per_radian[F], angles)
 
 
 def inner_curvature(
@@ -414,10 +444,7 @@ def inner_curvature(
     -------
     net, absolute : (n_charts,) float64 ndarrays
     """
-    total = np.bincount(F.ravel(), weights=corner_angles(V, F).ravel(), minlength=len(V))
-    inner = np.bincount(F.ravel(), minlength=len(V)) > 0
-    inner[boundary_edges(F).ravel()] = False
-    defect = np.where(inner, 2 * np.pi - total, 0.0)
+    defect = interior_defect(V, F)[0]
     net = np.bincount(vert_chart, weights=defect, minlength=n_charts)
     return net, np.bincount(vert_chart, weights=np.abs(defect), minlength=n_charts)
 

@@ -738,10 +738,12 @@ def _chart_stages(
                 progress=lambda done: report("parameterize", done, seg.n_charts),
                 affinity=seg.affinity,
                 workers=workers,
+                curvature=seg.face_curvature,
             )
         else:
             chart_set, seg = _parameterize_once(Vm, Fm, seg, repeats, cfg, seed, report, workers)
-    seg = dataclasses.replace(seg, affinity=None)  # an (m, m) matrix the atlas need not keep
+    # an (m, m) matrix and an (m,) array the atlas need not keep
+    seg = dataclasses.replace(seg, affinity=None, face_curvature=None)
     return _Charted(Vm, Fm, chart_set, timings, seg, cleaned, remeshed)
 
 
@@ -776,6 +778,8 @@ def _parameterize_once(
         progress=lambda done: report("parameterize", done, len(sources)),
         affinity=None if seg.affinity is None else seg.affinity[solved][:, solved],
         workers=workers,
+        # whole pieces left out: the faces kept keep their shares
+        curvature=None if seg.face_curvature is None else seg.face_curvature[solved],
     )
     charts = [
         dataclasses.replace(c, faces=solved[c.faces], vertices=used[c.vertices])

@@ -115,10 +115,10 @@ SMALL_CHART_MAX_STRETCH = 1.25
 #: :func:`segparam.mesh.curvature_shares`) is a cap no map meets ``max_stretch`` <=
 #: ``MAX_STRETCH`` on: it is cut before any solve (:func:`_caps`). On spherical caps the solver's
 #: L2 reaches 1.02 at 4.05-4.1 rad (icospheres subdivided 3-5 times: 4.13 rad 1.0207, 3.93 rad
-#: 1.0181) and 1.027 at 4.5. Of 1,900 pieces the split stage solved on 27 meshes (the quick
+#: 1.0181) and 1.027 at 4.5. Of 3,278 pieces the split stage solved on 27 meshes (the quick
 #: set, the turned CAD parts, capsules, spheres, three realistic brains), the 626 caught by
-#: these three bounds all failed (600 of them the halves of the 300 jittered spheres: 0.24 s of
-#: their 0.64 s stage went to solving them); the pieces that passed with 4.5 rad or more were
+#: these three bounds all failed (600 of them the halves of the 300 jittered spheres, whose round
+#: took 0.24 s of their 0.64 s stage); the pieces that passed with 4.5 rad or more were
 #: CAD walls whose curvature sits on their rims (a cylinder's, a cone's side), or noisy.
 CAP_CURVATURE = 4.5
 #: ... of which at least this much inside the chart, at its inner vertices (Gauss-Bonnet: what
@@ -462,6 +462,7 @@ def parameterize_charts(
     progress: Callable[[int], None] | None = None,
     affinity: sp.csr_matrix | None = None,
     workers=None,
+    curvature: np.ndarray | None = None,
 ) -> ChartSet:
     """Map every chart of a segmentation bijectively, splitting the ones that fail.
 
@@ -488,6 +489,11 @@ def parameterize_charts(
         Workers already started (:func:`start_workers`), used instead of starting new ones when
         the charts go to worker processes (``n_jobs``, ``PARALLEL_MIN_FACES``); the caller
         shuts them down.
+    curvature : (m,) float ndarray, optional
+        Each face's share of the Gaussian curvature (``Segmentation.face_curvature``), by which
+        the caps that no map within ``max_stretch`` exists for are cut without a solve
+        (:func:`_caps`); by default :func:`segparam.mesh.curvature_shares`, computed when a
+        chart first may be one.
 
     Returns
     -------
@@ -506,6 +512,10 @@ def parameterize_charts(
         raise InvalidMeshError(
             f"affinity must be {len(F)} x {len(F)} (one row per face), got {affinity.shape}"
         )
+    if curvature is not None and np.shape(curvature) != (len(F),):
+        raise InvalidMeshError(
+            f"curvature must be {len(F)} numbers (one per face), got shape {np.shape(curvature)}"
+        )
     center, size = unit_frame(V)
     V = (V - center) / size  # scale-free; chart uvs are scaled back below
     n_src = int(labels.max()) + 1
@@ -521,11 +531,10 @@ def parameterize_charts(
     ) as helpers:
         # Small charts, all at once: already in mesh indices and units.
         bulk_rejected, bulk_bijective = np.zeros(n_src, dtype=bool), np.zeros(n_src, dtype=bool)
-        # each face's curvature share, computed on first need (a cap candidate): 6 ms at 20k faces
-        curvature = functools.cache(lambda: curvature_shares(V, F)) if _may_cap(cfg) else None
+        shares = _curvature_source(V, F, curvature, cfg)
         final = _bulk_charts(
             V, F, sub, order, bounds, cfg, size, bulk_rejected, bulk_bijective, helpers=helpers,
-            curvature=curvature,
+            curvature=shares,
         )  # fmt: skip
         if progress is not None and final:
             progress(len(final))
@@ -543,6 +552,10 @@ def parameterize_charts(
             vertices, local_F = sub.of(src)
             return V[vertices], local_F, affinity.of_chart(faces, now=parallel), src
 
+        def shares_of(src: int) -> np.ndarray | None:
+            """The curvature shares of chart ``src``'s faces (:func:`_solve_source`'s caps)."""
+            return None if shares is None else shares()[sources[src]]
+
         results: dict[int, tuple[list[Chart], bool]] = {}
         if parallel:
             from concurrent.futures import as_completed
@@ -554,7 +567,10 @@ def parameterize_charts(
                 # blocked, a mask they inherit, so only this process sees it and stops them: no
                 # traceback from a worker that was still importing.
                 with _sigint_blocked():
-                    futures = {pool.submit(_solve_source, *task(s), cfg, seed): s for s in by_size}
+                    futures = {
+                        pool.submit(_solve_source, *task(s), cfg, seed, shares_of(s)): s
+                        for s in by_size
+                    }
                 for done, future in enumerate(as_completed(futures), len(final) + 1):
                     results[futures[future]] = future.result()
                     if progress is not None:
@@ -567,7 +583,7 @@ def parameterize_charts(
         else:
             results = _solve_in_rounds(
                 V, F, rest, sources, sub, affinity, cfg, seed, size, bulk_rejected, bulk_bijective,
-                progress, len(final), helpers, curvature=curvature,
+                progress, len(final), helpers, curvature=shares,
             )  # fmt: skip
 
         for src in rest:
@@ -1214,10 +1230,18 @@ def _caps(
     return inside & (share() >= CAP_CURVATURE) if inside.any() else inside
 
 
-def _may_cap(cfg: SplitConfig) -> bool:
-    """Whether :func:`_caps` can find any cap under this config (a stretch target of at most
-    ``MAX_STRETCH``)."""
-    return cfg.max_stretch is not None and cfg.max_stretch <= MAX_STRETCH
+def _curvature_source(
+    V: np.ndarray, F: np.ndarray, given: np.ndarray | None, cfg: SplitConfig
+) -> Callable[[], np.ndarray] | None:
+    """What gives each face's curvature share to :func:`_caps`: ``given``, or
+    :func:`segparam.mesh.curvature_shares` computed on first call (6 ms at 20k faces, 0.6 s at
+    1M: most meshes have no cap); None when no chart can be a cap under ``cfg`` (a stretch
+    target above ``MAX_STRETCH``, or none)."""
+    if cfg.max_stretch is None or cfg.max_stretch > MAX_STRETCH:
+        return None
+    if given is not None:
+        return functools.partial(np.asarray, given, dtype=np.float64)
+    return functools.cache(functools.partial(curvature_shares, V, F))
 
 
 def _pieces_capped(
@@ -1353,12 +1377,14 @@ def _solve_in_rounds(
             k for k, (*_, tried) in enumerate(pending)
             if k not in mapped and not (tried or k in rejected_at)
         ]  # fmt: skip
-        if curvature is not None and alone:  # the caps among them: cut without a solve
+        # the caps among them (deeper pieces are only projected): cut without a solve
+        solvable = [k for k in alone if pending[k][2] <= cfg.max_depth]
+        if curvature is not None and solvable:
             capped = _pieces_capped(
-                V, F, [sources[pending[k][0]][pending[k][1]] for k in alone], curvature, cfg
+                V, F, [sources[pending[k][0]][pending[k][1]] for k in solvable], curvature, cfg
             )
-            rejected_at |= {k for k, c in zip(alone, capped, strict=True) if c}
-            alone = [k for k, c in zip(alone, capped, strict=True) if not c]
+            rejected_at |= {k for k, c in zip(solvable, capped, strict=True) if c}
+            alone = [k for k in alone if k not in rejected_at]
         tasks = [(V[sub.of(src)[0]], sub.of(src)[1], faces, src, depth)
                  for src, faces, depth, *_ in (pending[k] for k in alone)]  # fmt: skip
         tried_alone = dict(zip(alone, _try_pieces(tasks, cfg, seed, helpers), strict=True))
@@ -1417,12 +1443,15 @@ def _solve_source(
     src: int,
     cfg: SplitConfig,
     seed: int,
+    shares: np.ndarray | None = None,
 ) -> tuple[list[Chart], bool]:
     """Map one segmentation chart, bisecting the pieces that fail (the per-chart task).
 
     ``V, F`` are the chart's own vertices and faces; ``affinity()`` gives its face affinity
-    (:meth:`_MeshAffinity.of_chart`; called only if the chart must be split). Returns the
-    bijective pieces, in chart-local indices, and whether the first try succeeded.
+    (:meth:`_MeshAffinity.of_chart`; called only if the chart must be split). With ``shares``
+    (its faces' :func:`segparam.mesh.curvature_shares` in the mesh), the caps (:func:`_caps`)
+    are bisected without a solve, as :func:`_solve_in_rounds` does. Returns the bijective
+    pieces, in chart-local indices, and whether the first try succeeded.
     """
     stack = [(np.arange(len(F)), 0)]
     pieces: list[Chart] = []
@@ -1431,7 +1460,12 @@ def _solve_source(
     while stack:
         faces, depth = stack.pop()
         status: dict = {}
-        chart = _try_piece(V, F, faces, src, depth, cfg, seed, status)
+        capped = (
+            shares is not None
+            and depth <= cfg.max_depth  # deeper pieces are only projected (_try_piece)
+            and bool(_pieces_capped(V, F, [faces], lambda: shares, cfg)[0])
+        )
+        chart = None if capped else _try_piece(V, F, faces, src, depth, cfg, seed, status)
         if depth == 0:
             first = _first_pass(chart, status)
         if chart is not None:

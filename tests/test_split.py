@@ -3,7 +3,7 @@ import pytest
 import trimesh
 from meshes import folded_strip, plate_with_holes, tri_grid
 
-from segparam.errors import ConfigError
+from segparam.errors import ConfigError, InvalidMeshError
 from segparam.mesh import boundary_edges
 from segparam.quality import chart_quality
 from segparam.segment import segment
@@ -538,3 +538,31 @@ def test_a_cap_within_reach_of_the_stretch_target_is_solved_whole():
         V, F, labels, config=SplitConfig(max_stretch=None, min_split_gain=None)
     )
     assert len(loose.charts) == 2 and loose.first_pass_bijective.all()
+
+
+def test_worker_processes_cut_caps_without_a_solve_too(monkeypatch):
+    # The per-chart tasks of worker processes (large meshes) skip the caps' solves as the
+    # rounds do: the same charts, and the same first-pass verdicts, whichever path maps them
+    # (the rounds solve the quarters in one batch, a worker one by one: the same maps to
+    # rounding).
+    import segparam.split as split
+
+    monkeypatch.setattr(split, "PARALLEL_MIN_FACES", 0)
+    V, F, labels = _halves(2)
+    serial = parameterize_charts(V, F, labels, config=SplitConfig(n_jobs=1))
+    parallel = parameterize_charts(V, F, labels, config=SplitConfig(n_jobs=2))
+    assert not parallel.first_pass_bijective.any()  # not tried: cut at once
+    assert np.array_equal(serial.first_pass_bijective, parallel.first_pass_bijective)
+    assert np.array_equal(serial.splits, parallel.splits)
+    for a, b in zip(serial.charts, parallel.charts, strict=True):
+        assert np.array_equal(a.faces, b.faces) and np.allclose(a.uv, b.uv, atol=1e-9)
+
+
+def test_the_segmentations_curvature_is_the_one_the_split_stage_would_compute():
+    from segparam.mesh import curvature_shares
+
+    V, F = plate_with_holes()
+    seg = segment(V, F)
+    assert np.allclose(seg.face_curvature, curvature_shares(V, F), atol=1e-12)
+    with pytest.raises(InvalidMeshError, match="curvature must be"):
+        parameterize_charts(V, F, seg.labels, curvature=np.zeros(3))
