@@ -121,3 +121,22 @@ def plate_with_holes(nx=24, ny=12, *, holes=((5, 9, 4, 8), (15, 19, 4, 8)), thic
         ]
     )
     return V, np.concatenate([top, bottom, walls]).astype(np.int64)
+
+
+def bulb(theta_max=120.0, n_around=48, n_down=24):
+    """A unit sphere from its north pole down past the equator to ``theta_max`` degrees, open
+    there: a knob (9.2 rad of curvature at 120 degrees) whose halves hold too much each to map
+    within the default stretch target."""
+    th = np.radians(np.linspace(0, theta_max, n_down + 1))[1:]
+    ph = np.linspace(0, 2 * np.pi, n_around, endpoint=False)
+    T, P = np.meshgrid(th, ph, indexing="ij")
+    ring = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1)
+    V = np.vstack([[0.0, 0.0, 1.0], ring.reshape(-1, 3)])
+    j = np.arange(n_around)
+    fan = np.column_stack([np.zeros(n_around, dtype=np.int64), 1 + j, 1 + (j + 1) % n_around])
+    i = np.arange(n_down - 1)[:, None]
+    a = 1 + i * n_around + j
+    b = 1 + i * n_around + (j + 1) % n_around
+    quads = np.stack([np.stack([a, a + n_around, b + n_around], -1),
+                      np.stack([a, b + n_around, b], -1)], 2).reshape(-1, 3)  # fmt: skip
+    return V, np.vstack([fan, quads]).astype(np.int64)

@@ -566,3 +566,41 @@ def test_the_segmentations_curvature_is_the_one_the_split_stage_would_compute():
     assert np.allclose(seg.face_curvature, curvature_shares(V, F), atol=1e-12)
     with pytest.raises(InvalidMeshError, match="curvature must be"):
         parameterize_charts(V, F, seg.labels, curvature=np.zeros(3))
+
+
+def _with_slits(monkeypatch, on):
+    import segparam.split as split
+
+    monkeypatch.setattr(split, "SLIT_MIN_DEPTH", 1 if on else 10**6)
+
+
+def test_a_knob_whose_halves_fail_gets_a_slit_instead_of_a_second_bisection(monkeypatch):
+    # A sphere from its pole past the equator: its halves hold 4.6 rad each and miss the
+    # stretch target; cut along a slit from their middle to their rim they map within it, one
+    # chart each, where a second bisection made two.
+    from meshes import bulb
+
+    V, F = bulb(120)
+    labels = np.zeros(len(F), dtype=np.int64)
+    cfg = SplitConfig(min_split_gain=None, n_jobs=1)
+    _with_slits(monkeypatch, False)
+    plain = parameterize_charts(V, F, labels, config=cfg)
+    _with_slits(monkeypatch, True)
+    cs = parameterize_charts(V, F, labels, config=cfg)
+    check_chart_set(V, F, cs)
+    assert len(plain.charts) == 4 and len(cs.charts) == 2
+    for c in cs.charts:
+        assert c.depth == 1 and c.quality.l2_stretch <= 1.02
+        # the slit: vertices that come twice, in a path from the rim inwards
+        twice = np.flatnonzero(np.bincount(c.vertices) == 2)
+        rim = np.unique(boundary_edges(F[c.faces]))
+        assert len(twice) >= 2 and np.isin(twice, rim).sum() >= 1
+    # the worker processes' per-chart task slits the same pieces
+    import segparam.split as split
+
+    monkeypatch.setattr(split, "PARALLEL_MIN_FACES", 0)
+    parallel = parameterize_charts(V, F, labels, config=SplitConfig(min_split_gain=None, n_jobs=2))
+    assert len(parallel.charts) == 2
+    for a, b in zip(cs.charts, parallel.charts, strict=True):
+        assert np.array_equal(a.faces, b.faces) and np.array_equal(a.vertices, b.vertices)
+        assert np.allclose(a.uv, b.uv, atol=1e-6)
