@@ -20,6 +20,14 @@ stretch, where a bisection gives two charts and two cuts. The chart keeps both c
 cut's vertices (``Chart.vertices`` repeats them). If that map fails too, or the tube has more
 loops, it is bisected as any chart.
 
+Curvature decides two shortcuts. A cap, a disk holding more curvature of one sign than any map
+within the stretch target allows (the halves of small spheres, ``CAP_CURVATURE``), is bisected
+without being solved first (:func:`_caps`). A knob-like piece that fails again after a
+bisection is first cut along a slit from its innermost vertex to its rim and solved once more
+(:func:`_slit_charts`, ``SLIT_MIN_CURVATURE``): the slit's tip takes up curvature as a cone's
+apex does, and the piece often maps as one chart where a bisection made two (the bone scan of
+``benchmarks/bench_atlas.py``: 20 -> 13 charts).
+
 Once every chart meets the targets, a small chart whose distortion sits at one spot (a cone of a
 coarse scan) is bisected again when that removes most of it (:func:`_split_for_gain`,
 ``min_split_gain``): on the realistic 2k-face brain of ``benchmarks/bench_atlas.py`` 98 -> 111
