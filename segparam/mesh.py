@@ -48,6 +48,7 @@ __all__ = [
     "disk_labels",
     "plane_basis",
     "prev_half_edge",
+    "slit_cut",
     "split_corners",
     "submesh",
     "vertex_adjacency",
@@ -807,16 +808,47 @@ def annulus_cut(V: np.ndarray, F: np.ndarray, *, boundary: tuple | None = None) 
     verts, _, n_loops, loop = boundary_pieces(B) if boundary is None else boundary[1]
     if n_loops != 2:
         return np.zeros((0, 2), dtype=np.int64)
+    a, b = verts[loop == 0], verts[loop == 1]
+    dist, pred, _ = dijkstra(_edge_graph(V, F), indices=a, min_only=True, return_predecessors=True)
+    return _path_back(pred, int(b[np.argmin(dist[b])]))
+
+
+def slit_cut(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """The shortest path of edges (3-D length) from a disk's innermost vertex, the one farthest
+    from its boundary along the edges, to the boundary: the slit that gives a cap's boundary
+    room to turn (:func:`cut_along`; :func:`segparam.split._slit_charts`).
+
+    Returns
+    -------
+    (c, 2) int64 ndarray
+        The path's edges, as vertex pairs; empty if the mesh has no boundary or no inner vertex.
+    """
+    from scipy.sparse.csgraph import dijkstra
+
+    rim = np.unique(boundary_edges(F))
+    if len(rim) == 0 or len(rim) == len(np.unique(F)):
+        return np.zeros((0, 2), dtype=np.int64)
+    # from every rim vertex at once: the innermost vertex's way back leads to its nearest one
+    dist, pred, _ = dijkstra(
+        _edge_graph(V, F), indices=rim, min_only=True, return_predecessors=True
+    )
+    return _path_back(pred, int(np.argmax(np.where(np.isfinite(dist), dist, -1.0))))
+
+
+def _edge_graph(V: np.ndarray, F: np.ndarray) -> sp.csr_matrix:
+    """The mesh's edges as a symmetric sparse graph weighted by their 3-D lengths."""
     E, _ = edges(F)
     length = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
     n = len(V)
-    G = sp.csr_matrix((np.r_[length, length], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
-                      shape=(n, n))  # fmt: skip
-    a, b = verts[loop == 0], verts[loop == 1]
-    dist, pred, _ = dijkstra(G, indices=a, min_only=True, return_predecessors=True)
-    end = int(b[np.argmin(dist[b])])
+    ends = (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])
+    return sp.csr_matrix((np.r_[length, length], ends), shape=(n, n))
+
+
+def _path_back(pred: np.ndarray, end: int) -> np.ndarray:
+    """The edges of a shortest path from ``end`` back to its search's source (scipy's
+    predecessors ``pred``, negative at a source), as ``(c, 2)`` vertex pairs."""
     path = [end]
-    while pred[path[-1]] >= 0:  # loop along the path (a few edges: loop to loop)
+    while pred[path[-1]] >= 0:  # loop along the path (a few edges)
         path.append(int(pred[path[-1]]))
     return np.column_stack([path[:-1], path[1:]]).astype(np.int64)
 

@@ -59,7 +59,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import dijkstra
 
 from .cores import Helpers, limit_blas, may_start_processes, stop_pool
 from .errors import InvalidMeshError, check_choice, check_int, check_number
@@ -72,7 +71,6 @@ from .mesh import (
     corner_angles,
     curvature_shares,
     cut_along,
-    edges,
     face_areas,
     face_normals,
     group_by_label,
@@ -81,6 +79,7 @@ from .mesh import (
     label_topology,
     mesh_arrays,
     plane_basis,
+    slit_cut,
     submesh,
     unit_frame,
 )
@@ -1752,11 +1751,11 @@ def _slit_ready(
     V: np.ndarray, F: np.ndarray, faces: np.ndarray, depth: int, cfg: SplitConfig
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """A piece that failed (``faces`` of the chart ``V, F``) cut along a slit
-    (:func:`_slit_cut`), when it is deep enough (``SLIT_MIN_DEPTH``, up to ``max_depth``),
-    large enough for the stretch target and a disk holding ``SLIT_MIN_CURVATURE`` radians or
-    more inside, mostly of one sign (``SLIT_ONE_SIGN``): ``(vertices, F_cut, copy_of)``, the
-    piece's vertices in the chart and its faces on their copies (the slit's vertices come
-    twice: ``vertices[copy_of]``), else None."""
+    (:func:`segparam.mesh.slit_cut`), when it is deep enough (``SLIT_MIN_DEPTH``, up to
+    ``max_depth``), large enough for the stretch target and a disk holding
+    ``SLIT_MIN_CURVATURE`` radians or more inside, mostly of one sign (``SLIT_ONE_SIGN``):
+    ``(vertices, F_cut, copy_of)``, the piece's vertices in the chart and its faces on their
+    copies (the slit's vertices come twice: ``vertices[copy_of]``), else None."""
     if not (SLIT_MIN_DEPTH <= depth <= cfg.max_depth and len(faces) >= STRETCH_MIN_FACES):
         return None
     vertices, local_F = submesh(F, faces)
@@ -1764,8 +1763,8 @@ def _slit_ready(
     net, absolute = inner_curvature(Vl, local_F, np.zeros(len(Vl), dtype=np.int64), 1)
     if net[0] < max(SLIT_MIN_CURVATURE, SLIT_ONE_SIGN * absolute[0]) or not is_disk(local_F):
         return None
-    cut = _slit_cut(Vl, local_F)
-    if cut is None:
+    cut = slit_cut(Vl, local_F)
+    if len(cut) == 0:
         return None
     F_cut, copy_of = cut_along(local_F, cut)
     return vertices, F_cut, copy_of
@@ -1839,25 +1838,6 @@ def _slit_charts(
             out[k] = Chart(faces, vertices[copy_of], F_cut, uv, quality_records(q, [j])[0],
                            src, depth, "hessian")  # fmt: skip
     return out
-
-
-def _slit_cut(V: np.ndarray, F: np.ndarray) -> np.ndarray | None:
-    """The shortest edge path (3-D length) from a disk's innermost vertex (the one farthest
-    from its boundary along the edges) to the nearest boundary vertex, as ``(k, 2)`` vertex
-    pairs; None for a disk without inner vertex."""
-    E = edges(F)[0]
-    length = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
-    G = sp.coo_matrix((length, (E[:, 0], E[:, 1])), shape=(len(V), len(V))).tocsr()
-    G = G + G.T
-    rim = np.unique(boundary_edges(F))
-    if len(rim) == len(V):
-        return None
-    start = int(np.argmax(dijkstra(G, indices=rim, min_only=True)))
-    dist, pred = dijkstra(G, indices=start, return_predecessors=True)
-    path = [int(rim[np.argmin(dist[rim])])]
-    while path[-1] != start:  # loop over the path's few edges, back to the start
-        path.append(int(pred[path[-1]]))
-    return np.column_stack([path[:-1], path[1:]])
 
 
 def chart_face_cover(charts: tuple[Chart, ...], m: int) -> np.ndarray:

@@ -447,3 +447,27 @@ def test_curvature_shares_hold_the_curvature_of_every_region_whatever_the_mesh()
         assert 0 < net[0] < share[upper].sum() and absolute[0] == pytest.approx(net[0])
     V, F = tri_grid(6, 6)  # flat: its boundary turns, it holds no curvature
     assert np.allclose(curvature_shares(V, F), 0, atol=1e-12)
+
+
+def test_a_slit_runs_from_the_innermost_vertex_to_the_nearest_rim_vertex():
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import dijkstra
+
+    V, F = tri_grid(9, 7)
+    cut = mesh.slit_cut(V, F)
+    E = mesh.edges(F)[0]
+    assert {tuple(e) for e in np.sort(cut, axis=1).tolist()} <= {tuple(e) for e in E.tolist()}
+    # a simple path: its ends are the vertices used once
+    ends = np.flatnonzero(np.bincount(cut.ravel(), minlength=len(V)) == 1)
+    rim = np.unique(mesh.boundary_edges(F))
+    assert len(ends) == 2 and np.isin(ends, rim).sum() == 1
+    assert np.isin(np.setdiff1d(cut.ravel(), ends), rim).sum() == 0  # only one end on the rim
+    # brute force: every vertex's distance to the rim along the edges
+    w = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+    G = sp.coo_matrix((np.r_[w, w], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])))
+    to_rim = dijkstra(G.tocsr(), indices=rim, min_only=True)
+    inner = ends[~np.isin(ends, rim)][0]
+    assert to_rim[inner] == pytest.approx(to_rim.max())  # the innermost vertex
+    length = np.linalg.norm(V[cut[:, 0]] - V[cut[:, 1]], axis=1).sum()
+    assert length == pytest.approx(to_rim[inner])  # and the shortest way out
+    assert mesh.slit_cut(V, F[:1]).shape == (0, 2)  # one triangle: no inner vertex
