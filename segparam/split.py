@@ -1732,6 +1732,18 @@ def _opened(
             status["bijective"] = True
         log.debug("chart %d depth %d: cut open and unrolled", src, depth)
         return Chart(faces, vertices[copy_of], F_cut, *unrolled, src, depth, "developable")
+    return _cut_solved(V, F_cut, copy_of, faces, vertices, src, depth, cfg, seed, status)
+
+
+def _cut_solved(
+    V: np.ndarray, F_cut: np.ndarray, copy_of: np.ndarray, faces: np.ndarray,
+    vertices: np.ndarray, src: int, depth: int, cfg: SplitConfig, seed: int,
+    status: dict | None = None,
+) -> Chart | None:  # fmt: skip
+    """A piece cut open (a tube, :func:`_opened`, or along a slit, :func:`_slit_ready`) solved
+    alone: ``V`` its vertices' positions, ``F_cut`` its faces on their copies ``copy_of``,
+    ``faces`` and ``vertices`` its faces and vertices in the chart. Its chart if the map is
+    kept, else None (the caller splits it); ``status`` as :func:`_try_piece`'s."""
     try:
         result = _solved(V[copy_of], F_cut, len(faces), cfg, seed)
     except InvalidMeshError as exc:  # e.g. too thin for the solver's neighbourhoods: split it
@@ -1777,21 +1789,10 @@ def _slit_open(
     """:func:`_slit_ready`'s piece solved alone: its chart if the map is kept, else None (the
     caller bisects the piece)."""
     ready = _slit_ready(V, F, faces, depth, cfg)
-    return None if ready is None else _slit_solved(V, faces, *ready, src, depth, cfg, seed)
-
-
-def _slit_solved(V, faces, vertices, F_cut, copy_of, src, depth, cfg, seed) -> Chart | None:
-    """One slit piece (:func:`_slit_ready`) solved alone: its chart if the map is kept."""
-    try:
-        result = _solved(V[vertices[copy_of]], F_cut, len(faces), cfg, seed)
-    except InvalidMeshError as exc:  # e.g. too thin for the solver's neighbourhoods
-        log.debug("chart %d depth %d, slit: %s", src, depth, exc)
+    if ready is None:
         return None
-    if not _kept(result, len(faces), cfg):
-        return None
-    return Chart(
-        faces, vertices[copy_of], F_cut, result.uv, result.quality, src, depth, result.method
-    )
+    vertices, F_cut, copy_of = ready
+    return _cut_solved(V[vertices], F_cut, copy_of, faces, vertices, src, depth, cfg, seed)
 
 
 def _slit_charts(
@@ -1807,10 +1808,13 @@ def _slit_charts(
         ready = _slit_ready(V, F, faces, depth, cfg)
         if ready is None:
             continue
-        if len(ready[2]) <= min(BATCH_MAX_VERTICES, DENSE_LIMIT):
+        vertices, F_cut, copy_of = ready
+        if len(copy_of) <= min(BATCH_MAX_VERTICES, DENSE_LIMIT):
             batch.append((k, ready))
         else:
-            out[k] = _slit_solved(V, faces, *ready, src, depth, cfg, seed)
+            out[k] = _cut_solved(
+                V[vertices], F_cut, copy_of, faces, vertices, src, depth, cfg, seed
+            )
     if not batch:
         return out
     Vs = [pieces[k][0][vertices[copy_of]] for k, (vertices, _, copy_of) in batch]
@@ -1825,9 +1829,11 @@ def _slit_charts(
         )  # fmt: skip
     except (InvalidMeshError, np.linalg.LinAlgError) as exc:  # not expected: one by one
         log.debug("batched slits failed (%s); solving %d one by one", exc, len(batch))
-        for k, ready in batch:
+        for k, (vertices, F_cut, copy_of) in batch:
             V, _, faces, src, depth = pieces[k]
-            out[k] = _slit_solved(V, faces, *ready, src, depth, cfg, seed)
+            out[k] = _cut_solved(
+                V[vertices], F_cut, copy_of, faces, vertices, src, depth, cfg, seed
+            )
         return out
     q = maps.quality
     ok = q["bijective"] & _within_targets(q["angle_distortion"], q["l2_stretch"], n_faces, cfg)
