@@ -455,7 +455,9 @@ def _median_side(f: np.ndarray) -> np.ndarray:
     return side
 
 
-def divide(W: sp.spmatrix, faces: np.ndarray, *, seed: int = 0) -> list[np.ndarray]:
+def divide(
+    W: sp.spmatrix, faces: np.ndarray, *, seed: int = 0, straighten: tuple[int, int] | None = None
+) -> list[np.ndarray]:
     """Cut a set of faces in pieces: its connected components if it has several, else the two
     halves of :func:`fiedler_bisect` (either half may itself fall apart).
 
@@ -465,6 +467,9 @@ def divide(W: sp.spmatrix, faces: np.ndarray, *, seed: int = 0) -> list[np.ndarr
         Face affinity of the whole mesh.
     faces : (k,) int ndarray
         The faces to cut, ``k >= 2``.
+    straighten : (min_faces, passes), optional
+        A set of at least ``min_faces`` faces gets its two halves' border straightened by
+        ``passes`` of the segmentation's majority filter (:func:`_straightened`).
 
     Returns
     -------
@@ -476,22 +481,41 @@ def divide(W: sp.spmatrix, faces: np.ndarray, *, seed: int = 0) -> list[np.ndarr
     if n_comp > 1:
         return [faces[comp == k] for k in range(n_comp)]
     side = fiedler_bisect(sub, seed=seed)
+    if straighten is not None and len(faces) >= straighten[0]:
+        side = _straightened(_neighbor_table(sp.csr_matrix(sub))[0], side, straighten[1])
     return [faces[side], faces[~side]]
 
 
+def _straightened(nbr: np.ndarray, side: np.ndarray, passes: int) -> np.ndarray:
+    """A bisection's sides (``side``, over the nodes of the neighbour table ``nbr``) after
+    ``passes`` of the majority filter that smooths the segmentation's borders
+    (:func:`_majority_passes`): the median of a Fiedler vector cuts through a band of faces and
+    leaves one-face teeth along the cut. Kept only if both sides keep faces. Each node's
+    neighbours are taken in descending order (the filter lets the first three vote), so the
+    sides do not depend on how the caller's sparse matrix ordered them."""
+    nbr = -np.sort(-nbr, axis=1)  # -1 (no neighbour) last
+    labels = _majority_passes(nbr, side.astype(np.int64), passes)
+    return labels.astype(bool) if 0 < labels.sum() < len(labels) else side
+
+
 def divide_many(
-    W: sp.spmatrix, groups: list[np.ndarray], *, seed: int = 0
+    W: sp.spmatrix,
+    groups: list[np.ndarray],
+    *,
+    seed: int = 0,
+    straighten: tuple[int, int] | None = None,
 ) -> list[list[np.ndarray]]:
     """:func:`divide` of every face set in ``groups`` (each of 2+ faces, disjoint), the small
     ones (up to ``DENSE_LIMIT`` faces) at once: one restriction of ``W``, one
     connected-components pass, then a dense eigenproblem per group. The split stage cuts many
     small pieces per round (the 600 halves of 300 small spheres): one :func:`divide` each cost
-    1.6 ms, mostly sparse-matrix overhead. Same pieces as :func:`divide`, in the same order.
+    1.6 ms, mostly sparse-matrix overhead. Same pieces as :func:`divide`, in the same order
+    (``straighten`` as there).
     """
     out: list[list[np.ndarray] | None] = [None] * len(groups)
     small = [i for i, g in enumerate(groups) if len(g) <= DENSE_LIMIT]
     for i in sorted(set(range(len(groups))) - set(small)):  # loop over the few large ones
-        out[i] = divide(W, groups[i], seed=seed)
+        out[i] = divide(W, groups[i], seed=seed, straighten=straighten)
     if small:
         sizes = np.array([len(groups[i]) for i in small])
         bounds = np.r_[0, np.cumsum(sizes)]
@@ -509,6 +533,7 @@ def divide_many(
         # each group's rows of `sub` hold its entries only: its dense block is read off them,
         # without a sparse slice per group (0.1 ms each; 600 sphere halves: 0.09 s)
         row = np.repeat(np.arange(len(every)), np.diff(sub.indptr))
+        nbr = None if straighten is None else _neighbor_table(sub)[0]  # within groups only
         with one_blas_thread():
             for j, i in enumerate(small):  # loop over small groups: one dense eigh each
                 a, b = int(bounds[j]), int(bounds[j + 1])
@@ -520,22 +545,24 @@ def divide_many(
                 block = np.zeros((b - a, b - a))
                 e = slice(sub.indptr[a], sub.indptr[b])
                 block[row[e] - a, sub.indices[e] - a] = sub.data[e]
-                out[i] = _halves(faces, block, d[a:b])
+                side = _half_side(block, d[a:b])
+                if straighten is not None and b - a >= straighten[0]:
+                    local = np.where(nbr[a:b] >= 0, nbr[a:b] - a, -1)
+                    side = _straightened(local, side, straighten[1])
+                out[i] = [faces[side], faces[~side]]
     return out  # type: ignore[return-value]
 
 
-def _halves(faces: np.ndarray, Wg: np.ndarray, d: np.ndarray) -> list[np.ndarray]:
-    """:func:`fiedler_bisect`'s halves of a small connected set (its dense affinity ``Wg``, row
+def _half_side(Wg: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """:func:`fiedler_bisect`'s side of a small connected set (its dense affinity ``Wg``, row
     sums ``d``): the same normalized Laplacian, entry for entry."""
-    m = len(faces)
+    m = len(d)
     if m <= 2:
-        side = np.arange(m) == 0
-        return [faces[side], faces[~side]]
+        return np.arange(m) == 0
     d_safe = np.where(d > 0, d, 1.0)
     dm = 1 / np.sqrt(d_safe)
     L = np.eye(m) - (dm[:, None] * Wg) * dm[None, :]
-    side = _median_side(lowest_pairs(L, 2)[1][:, 1] / np.sqrt(d_safe))
-    return [faces[side], faces[~side]]
+    return _median_side(lowest_pairs(L, 2)[1][:, 1] / np.sqrt(d_safe))
 
 
 def _proxy_cells(W: sp.csr_matrix, n_cells: int, seed: int) -> np.ndarray:

@@ -654,6 +654,50 @@ def test_divide_many_cuts_as_divide_does():
         one = divide(W, g, seed=0)
         assert len(parts) == len(one)
         assert all(np.array_equal(a, b) for a, b in zip(parts, one, strict=True))
+    # with the halves straightened from 40 faces: the same pieces both ways, and some moved (on
+    # a jittered sphere: the regular one's cuts have no teeth to remove)
+    W = face_affinity(V + np.random.default_rng(1).normal(0, 0.02, V.shape), F)
+    many = divide_many(W, groups, seed=0)
+    straight = divide_many(W, groups, seed=0, straighten=(40, 4))
+    moved = 0
+    for g, parts, plain in zip(groups, straight, many, strict=True):
+        one = divide(W, g, seed=0, straighten=(40, 4))
+        assert len(parts) == len(one) == len(plain)
+        assert all(np.array_equal(a, b) for a, b in zip(parts, one, strict=True))
+        moved += not all(np.array_equal(a, b) for a, b in zip(parts, plain, strict=True))
+    assert moved >= 3  # the cap, the band piece and the large group
+
+
+def _halves_cut(F, halves):
+    """Mesh edges with one face in each half (:func:`_cut_edges`, faces in neither left out)."""
+    side = np.full(len(F), -1)
+    for k, h in enumerate(halves):
+        side[h] = k
+    inside = side >= 0
+    F_in = F[inside]
+    return _cut_edges(F_in, side[inside])
+
+
+@pytest.mark.parametrize("subdivisions", [2, 3])  # 320 faces whole (dense Fiedler), 641 (ARPACK)
+def test_straightened_bisection_cuts_fewer_edges_and_keeps_the_halves(subdivisions):
+    """On a jittered sphere the median of the Fiedler vector cuts through a band of faces (teeth
+    along the cut); the majority filter straightens it: fewer cut edges, every face still in one
+    half, both halves close to the median's sizes. Below the size bound nothing moves."""
+    from segparam.segment import divide
+
+    m = trimesh.creation.icosphere(subdivisions)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    V = V + np.random.default_rng(1).normal(0, 0.05, V.shape)
+    faces = np.arange(len(F)) if subdivisions == 2 else np.flatnonzero(V[F].mean(1)[:, 2] > 0)
+    W = face_affinity(V, F)
+    plain = divide(W, faces, seed=0)
+    straight = divide(W, faces, seed=0, straighten=(len(faces), 4))
+    assert len(straight) == 2 and all(len(h) for h in straight)
+    assert np.array_equal(np.sort(np.concatenate(straight)), faces)
+    assert _halves_cut(F, straight) < _halves_cut(F, plain)
+    assert abs(len(straight[0]) - len(faces) / 2) < 0.05 * len(faces)
+    above = divide(W, faces, seed=0, straighten=(len(faces) + 1, 4))  # too small: the median
+    assert all(np.array_equal(a, b) for a, b in zip(above, plain, strict=True))
 
 
 def test_a_planar_region_is_one_chart_and_a_two_chart_open_region_is_tried_whole():

@@ -558,6 +558,45 @@ def test_worker_processes_cut_caps_without_a_solve_too(monkeypatch):
         assert np.array_equal(a.faces, b.faces) and np.allclose(a.uv, b.uv, atol=1e-9)
 
 
+def _cut_edges(F, charts):
+    """Mesh edges between two charts."""
+    from segparam.mesh import face_adjacency
+
+    chart = np.empty(len(F), dtype=np.int64)
+    for k, c in enumerate(charts):
+        chart[c.faces] = k
+    i, j = face_adjacency(F)[0].T
+    return int((chart[i] != chart[j]).sum())
+
+
+def test_bisections_of_large_pieces_are_straightened_in_the_rounds_and_in_the_workers(
+    monkeypatch,
+):
+    # A jittered sphere's hemispheres (640 faces, caps: bisected at once) are cut along the
+    # Fiedler vector's median with teeth; from STRAIGHTEN_MIN_FACES faces the split stage
+    # straightens the cut (segment.divide's `straighten`): fewer mesh edges between charts
+    # than with the median cuts, and the same charts whether the rounds or a worker's task
+    # cut them.
+    import segparam.split as split
+
+    V, F, labels = _halves(3)
+    V = V + np.random.default_rng(1).normal(0, 0.02, V.shape)
+    assert min(np.bincount(labels)) >= split.STRAIGHTEN_MIN_FACES
+    one = SplitConfig(n_jobs=1)
+    cs = parameterize_charts(V, F, labels, config=one)
+    check_chart_set(V, F, cs)
+    monkeypatch.setattr(split, "PARALLEL_MIN_FACES", 0)
+    parallel = parameterize_charts(V, F, labels, config=SplitConfig(n_jobs=2))
+    assert len(parallel.charts) == len(cs.charts)
+    for a, b in zip(cs.charts, parallel.charts, strict=True):
+        assert np.array_equal(a.faces, b.faces)
+    monkeypatch.undo()
+    monkeypatch.setattr(split, "_STRAIGHTEN", (len(F) + 1, split.STRAIGHTEN_PASSES))
+    plain = parameterize_charts(V, F, labels, config=one)
+    check_chart_set(V, F, plain)
+    assert _cut_edges(F, cs.charts) < _cut_edges(F, plain.charts)
+
+
 def test_the_segmentations_curvature_is_the_one_the_split_stage_would_compute():
     from segparam.mesh import curvature_shares
 
