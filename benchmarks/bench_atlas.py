@@ -8,6 +8,9 @@ quick (up to ~36k faces)
 
 ``brain-2k``
     ``segparam.synthetic.brain_like_surface(2000)``: a small closed cortex-like surface.
+``brain-2k-s1``, ``brain-2k-s2``
+    The same at seeds 1 and 2: one coarse folded surface is one draw of its distortion
+    (seed 0 meets issue 14's bounds, the next seeds do not; BENCHMARKS.md 0.1, session 23).
 ``triangles-2000``
     2,000 disjoint random triangles (many components): centres uniform in [0, 10]^3, corners
     centre + N(0, 0.2) per coordinate (``numpy.random.default_rng(0)``: centres first, then
@@ -324,6 +327,8 @@ def turned_part(kind: str) -> tuple[np.ndarray, np.ndarray]:
 # name -> (group, builder); groups: quick, default, large, huge (each adds to the one before)
 MESHES: dict[str, tuple[str, Callable[[], tuple[np.ndarray, np.ndarray]]]] = {
     "brain-2k": ("quick", lambda: brain_like_surface(2_000)),
+    "brain-2k-s1": ("quick", lambda: brain_like_surface(2_000, seed=1)),
+    "brain-2k-s2": ("quick", lambda: brain_like_surface(2_000, seed=2)),
     "triangles-2000": ("quick", lambda: disjoint_triangles(2_000)),
     "sheet-3k": ("quick", lambda: wavy_sheet(58, 29)),
     "icosphere": ("quick", lambda: icosphere(5)),
