@@ -2,7 +2,8 @@
 
 Each chart goes to the Hessian solver (:func:`segparam.parameterize.parameterize_chart`). A chart
 whose map is not bijective, or misses the distortion target, is bisected along the Fiedler vector of
-its face graph (with the segmentation's crease-aware affinities, so cuts prefer high curvature) and
+its face graph (with the segmentation's crease-aware affinities, so cuts prefer high curvature;
+from ``STRAIGHTEN_MIN_FACES`` faces the cut is straightened as the segmentation's borders are) and
 both halves are solved again, recursively, up to a depth limit. Pieces too small for the solver,
 and pieces past the depth limit, are projected onto their best-fit plane, and that projection is
 kept only if it is bijective; otherwise they are bisected further. A single triangle always
@@ -185,28 +186,29 @@ GAIN_MIN_SHARE = 0.7
 #: quarters 60% and 32%), and trying them cost the stage 1.9 s of CPU on the wavy scan (1.4 ->
 #: 3.3 s) and 0.5-0.8 s on the icosphere and the torus.
 GAIN_MAX_FACES = 256
-#: A piece of at least ``STRAIGHTEN_MIN_FACES`` faces that is bisected gets the border between
-#: its halves straightened by ``STRAIGHTEN_PASSES`` passes of the segmentation's majority
-#: filter (as its own borders, ``SegmentConfig.smoothing``): the Fiedler vector's median cuts
-#: through a band of faces and leaves one-face teeth, which cost seam length and, in the packed
-#: atlas, room. Smaller pieces keep the median cut: the filter moves a large share of their faces
-#: and their maps distort more (on the 2k brain, straightening every cut took the angle
-#: distortion 1.0716 -> 1.0908, past issue 14's bound of xatlas + 0.02 = 1.077; from 150 faces
-#: 1.0750, from 200 1.0729). Measured from 200 faces on ten meshes at seeds 0-2 (bone, cow,
-#: airplane, bunny with holes, fsaverage5, brain-20k, brain-2k, icosphere, torus, bunny;
-#: remeshing off): seams 2.9% shorter on average (the cow's +0.5% the most added), utilization
-#: +0.7 points on average (16 sets up, 8 down, -1.5 to +3.2: the bone 0.658 -> 0.690), L2
-#: unchanged, angle distortion +0.0002 on average and +0.0012 at most (BENCHMARKS.md, 0.1).
-STRAIGHTEN_MIN_FACES = 200
-STRAIGHTEN_PASSES = 4
-#: ``segment.divide``'s ``straighten`` argument.
-_STRAIGHTEN = (STRAIGHTEN_MIN_FACES, STRAIGHTEN_PASSES)
 #: ... and the least excess of its own (``(L2^2 - 1) + (angle - 1)`` of the chart alone) a chart
 #: needs to be tried: a chart this close to an isometry is left whole however large its share
 #: of a small mesh (a 4-face strip folded down its middle, refined to L2 1.0000 / angle 1.0017,
 #: was cut in two). The bisections kept on the 2k brain were of charts of 0.11-0.25, brain-20k's
 #: one of 0.11.
 GAIN_MIN_EXCESS = 0.02
+#: A piece of at least ``STRAIGHTEN_MIN_FACES`` faces that is bisected gets the border between
+#: its halves straightened by ``STRAIGHTEN_PASSES`` passes of the segmentation's majority
+#: filter (as its own borders, ``SegmentConfig.smoothing``): the Fiedler vector's median cuts
+#: through a band of faces and leaves one-face teeth, which cost seam length and, in the packed
+#: atlas, room. Smaller pieces keep the median cut: the filter moves a large share of their
+#: faces and their maps distort more (a prototype on the 2k brain: straightening every cut took
+#: its angle distortion 1.0716 -> 1.0908, past issue 14's bound of xatlas + 0.02 = 1.077; from
+#: 150 faces 1.0750, from 200 1.0729). From 200 faces, on ten meshes at seeds 0-2 (bone, cow,
+#: airplane, bunny with holes, fsaverage5, brain-20k, brain-2k, icosphere, torus, bunny;
+#: remeshing off): seams 2.8% shorter on average (none longer), utilization +0.4 points on
+#: average (20 sets up, 7 down, -1.8 to +2.2: the packer's noise around a small gain), L2
+#: +0.0003 at most, angle distortion +0.0003 on average and +0.0015 at most (BENCHMARKS.md 0.1,
+#: session 23).
+STRAIGHTEN_MIN_FACES = 200
+STRAIGHTEN_PASSES = 4
+#: ``segment.divide``'s ``straighten`` argument.
+_STRAIGHTEN = (STRAIGHTEN_MIN_FACES, STRAIGHTEN_PASSES)
 #: A chart with two or more boundary loops, each turning by less than this in total (the sum
 #: over its vertices of pi minus their corner angles, the discrete geodesic curvature), is a
 #: tube: a drilled hole's wall or a pipe (a straight cylinder's loops turn by 0), a cone's side
