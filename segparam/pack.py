@@ -123,7 +123,8 @@ _RULE_CODES = {"rest": canvas.REST, "holes": canvas.HOLES}
 # A trial's canvas is taller than the texture by 1/_HEADROOM of it, so that an over-full trial
 # still places every chart and reports the height it needed (the next guess of the scale).
 _HEADROOM = 2
-# Scale search (`pack_charts`), a safeguarded secant search on the one global scale:
+# Scale search (`pack_charts`), a safeguarded secant search on the one global scale (the
+# measurements behind each rule, and the variants rejected: BENCHMARKS.md sections 0.1 and 4):
 # - the first guess, as a fraction of the area bound of `_scale_bounds` (at the area bound the
 #   charts would have to fill the whole square, which no layout of footprints does), or this
 #   fraction under the side bound if that is smaller: the longest chart's box then spans the
@@ -133,12 +134,9 @@ _FIRST_GUESS = 0.88
 _UNDER_SIDE = 1e-6
 # - with many charts (at least _MODEL_CHARTS) the first guess is the scale at which the charts,
 #   each a square of its area grown by padding + 1 texels, would fill _MODEL_FILL of the texture
-#   (`_first_scale`): on 8 sets of 569-4,000 triangles and sphere pieces it was within 2% of the
-#   scale the search ended at, where 0.88 of the bound was 8-30% too large; their searches took
-#   21 trials instead of 34 (packing time 9.2 -> 6.1 s), utilization within 0.42 points either
-#   way. With fewer charts the layouts, and so the scale a search ends at, change by more from
-#   one guess to the next: a first scale from this model lost the 50 synthetic charts 1.8 points
-#   and the 2k brain's 111 charts 0.5 (BENCHMARKS.md, section 0: sessions 7 and 9);
+#   (`_first_scale`): within 2% of where the search ends on 569-4,000 triangles and sphere
+#   pieces (0.88 of the bound was 8-30% too large: 34 -> 21 trials); fewer charts' layouts move
+#   too much from one guess to the next for a model (the 50 synthetic charts -1.8 points);
 _MODEL_CHARTS = 500
 _MODEL_FILL = 0.75
 # - the relative precision on the scale at which the bracket [fits, fails] is narrow enough;
@@ -147,25 +145,15 @@ _SCALE_TOL = 0.006
 # - the most trials once a layout fits (5 trials cost brain-20k 0.55 points, 4 trials 1.1 points);
 _MAX_TRIALS = 6
 # - the "full" stop: many charts (at least _SMOOTH_CHARTS) fill the height a trial needs smoothly
-#   as the scale grows, so a fit that uses all but _FULL of the texture's side ends the search:
-#   on 2,000 triangles it saves 3 of 6 trials at the same utilization (tiny-300 and 600 sphere
-#   halves unchanged too). With few charts the height jumps from one scale to the next and a later
-#   trial can still fit a larger scale (brain-20k lost 0.55 points with this rule), so they search
-#   on;
+#   as the scale grows, so a fit that uses all but _FULL of the texture's side ends the search
+#   (2,000 triangles: 3 of 6 trials saved, the same utilization); with fewer charts the height
+#   jumps from one scale to the next and a later trial can still fit, so they search on;
 _FULL = 0.006
 _SMOOTH_CHARTS = 100
 # - with fewer charts, a fit that fills the texture is followed by a trial this much larger
-#   instead of the bisection towards the last failure (or the area bound), where greedy layouts
-#   of few charts rarely fit: the CAD plate's charts fill the texture at the first guess, and its
-#   search went 6 -> 4 trials to the same layout (0.14 -> 0.09 s; session 12). The step is just
-#   inside `_SCALE_TOL`, so that a failure there ends the search at once: at twice `_SCALE_TOL`
-#   (until session 19) the plate's 12 charts failed at +1.2%, +0.6% and +0.3%, 4 trials for the
-#   first fit's layout, now 2. Until session 21 the rule waited for a search without a failure;
-#   after one, the bone scan's 20 charts (pymeshlab's bone.ply) filled the texture at the third
-#   trial and failed at three bisections above it: on 46 captured sets (the quick meshes', the
-#   real meshes', CAD parts', 12 synthetic brains of 1k-10k faces) three take the path now
-#   (bone 6 -> 4 trials, fsaverage5 4 -> 3, a 1k brain 6 -> 3), every layout the same, and
-#   `bench_pack.py --no-atlas` the same (BENCHMARKS.md, section 0.1, session 21);
+#   instead of a bisection towards the last failure, where greedy layouts of few charts rarely
+#   fit; the step is just inside `_SCALE_TOL`, so a failure there ends the search (the CAD plate
+#   6 -> 2 trials, the bone scan 6 -> 4, the same layouts);
 _FULL_STEP = _SCALE_TOL * (1 - 1e-6)
 # - a rectangle trial that fails reports only the fraction of the area it placed: the next scale
 #   shrinks by its square root, by at least 3% and at most by half;
@@ -175,22 +163,15 @@ _SHRINK_MOST = 0.5
 #   always moves down;
 _UNDER_FAILED = 0.97
 # - except with many charts (at least _MODEL_CHARTS), whose needed height grows smoothly with
-#   the scale: there a trial that failed before any fit is followed by the secant step aimed at
-#   the middle of the "full" window (_AIM of the side), at most just under the failed scale: on
-#   11 sets of 600-4,000 triangles and 558-2,013 sphere pieces 28 -> 22 trials, utilization
-#   -0.06 to +0.33 points; aimed at 0.994 / 0.999 of the side 21 / 25 trials. On 97-129 brain
-#   charts, where the height jumps from one scale to the next, it moved utilization by -0.9 to
-#   +1.2 points for 30 -> 26 trials, so they keep the 3% (BENCHMARKS.md, section 0.1, session 18);
+#   the scale: there a failed trial before any fit is followed by the secant step aimed at the
+#   middle of the "full" window (_AIM of the side), at most just under the failed scale (600-4,000
+#   triangles and sphere pieces: 28 -> 22 trials; on ~100 brain charts, whose height jumps, it
+#   moved utilization by -0.9 to +1.2 points, so they keep the 3%);
 _AIM = 1 - _FULL / 2
 # - and with fewer charts after a near miss: a trial that needed at most _NEAR_MISS more of the
-#   side than the texture has is followed by the same aimed step. The 3% below it landed on a
-#   loose fit, and two or three trials climbed back (brain-20k with one chart fewer: 1,033 rows,
-#   then 977, then three more trials, 0.022 utilization lower). On 58 captured chart sets (the
-#   quick and real meshes', CAD parts', 24 synthetic brains of 1k-10k faces, bench_pack.py's 15)
-#   251 -> 214 trials, the mean utilization the same (+0.015 points; single sets -0.93 to +1.03,
-#   as any change of the scales tried moves a few charts' layout; bench_pack.py's sets -0.18 at
-#   worst). At 1% (a near miss of ten rows): 183 of 197 trials on the first 46 sets, the worst
-#   set -0.89; at 4%: 166, -1.0 (BENCHMARKS.md, section 0.1, session 21);
+#   side than the texture has is followed by the same aimed step, where 3% below it landed on a
+#   loose fit and two or three trials climbed back (58 captured chart sets: 251 -> 214 trials,
+#   the mean utilization the same);
 _NEAR_MISS = 0.02
 # - the most trials while no layout fits (each one 3% smaller at least: 60 reach 17% of the first
 #   guess), before the SolverError.
