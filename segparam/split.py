@@ -72,6 +72,7 @@ from .mesh import (
     corner_angles,
     curvature_shares,
     cut_along,
+    disk_labels,
     face_areas,
     face_normals,
     group_by_label,
@@ -1310,11 +1311,7 @@ def _pieces_capped(
     labels = np.zeros(len(F), dtype=np.int64)
     labels[order] = np.repeat(np.arange(len(pieces)), sizes)
     vertices, Fu, vert_chart = _union(_submeshes(F, labels, order, bounds), np.arange(len(pieces)))
-    topo = label_topology(Fu, vert_chart[Fu[:, 0]], len(pieces))
-    disk = (
-        topo["edge_manifold"] & topo["vertex_manifold"] & (topo["components"] == 1)
-        & (topo["loops"] == 1) & (topo["euler"] == 1)
-    )  # fmt: skip
+    disk = disk_labels(Fu, vert_chart[Fu[:, 0]], len(pieces), holes=False)
 
     def share() -> np.ndarray:
         return np.add.reduceat(curvature()[order], bounds[:-1])
