@@ -1808,8 +1808,15 @@ def _slit_open(
     """:func:`_slit_ready`'s piece solved alone: its chart if the map is kept, else None (the
     caller bisects the piece)."""
     ready = _slit_ready(V, F, faces, depth, cfg)
-    if ready is None:
-        return None
+    return None if ready is None else _slit_solved(V, ready, faces, src, depth, cfg, seed)
+
+
+def _slit_solved(
+    V: np.ndarray, ready: tuple, faces: np.ndarray, src: int, depth: int, cfg: SplitConfig,
+    seed: int,
+) -> Chart | None:  # fmt: skip
+    """A piece :func:`_slit_ready` cut open (``ready``; ``V`` its chart's vertices) solved alone
+    (:func:`_cut_solved`)."""
     vertices, F_cut, copy_of = ready
     return _cut_solved(V[vertices], F_cut, copy_of, faces, vertices, src, depth, cfg, seed)
 
@@ -1827,13 +1834,11 @@ def _slit_charts(
         ready = _slit_ready(V, F, faces, depth, cfg)
         if ready is None:
             continue
-        vertices, F_cut, copy_of = ready
+        _, _, copy_of = ready  # the piece's vertices, the slit's twice
         if len(copy_of) <= min(BATCH_MAX_VERTICES, DENSE_LIMIT):
             batch.append((k, ready))
         else:
-            out[k] = _cut_solved(
-                V[vertices], F_cut, copy_of, faces, vertices, src, depth, cfg, seed
-            )
+            out[k] = _slit_solved(V, ready, faces, src, depth, cfg, seed)
     if not batch:
         return out
     Vs = [pieces[k][0][vertices[copy_of]] for k, (vertices, _, copy_of) in batch]
@@ -1848,11 +1853,9 @@ def _slit_charts(
         )  # fmt: skip
     except (InvalidMeshError, np.linalg.LinAlgError) as exc:  # not expected: one by one
         log.debug("batched slits failed (%s); solving %d one by one", exc, len(batch))
-        for k, (vertices, F_cut, copy_of) in batch:
+        for k, ready in batch:
             V, _, faces, src, depth = pieces[k]
-            out[k] = _cut_solved(
-                V[vertices], F_cut, copy_of, faces, vertices, src, depth, cfg, seed
-            )
+            out[k] = _slit_solved(V, ready, faces, src, depth, cfg, seed)
         return out
     q = maps.quality
     ok = q["bijective"] & _within_targets(q["angle_distortion"], q["l2_stretch"], n_faces, cfg)
