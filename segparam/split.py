@@ -22,8 +22,9 @@ cut's vertices (``Chart.vertices`` repeats them). If that map fails too, or the 
 loops, it is bisected as any chart.
 
 Curvature decides two shortcuts. A cap, a disk holding more curvature of one sign than any map
-within the stretch target allows (the halves of small spheres, ``CAP_CURVATURE``), is bisected
-without being solved first (:func:`_caps`). A knob-like piece that fails again after a
+within the stretch target allows (the halves of small spheres, ``CAP_CURVATURE``), or more
+positive curvature inside whatever saddles it holds besides (a bone's knob, ``CAP_NET``), is
+bisected without being solved first (:func:`_caps`). A knob-like piece that fails again after a
 bisection is first cut along a slit from its innermost vertex to its rim and solved once more
 (:func:`_slit_charts`, ``SLIT_MIN_CURVATURE``): the slit's tip takes up curvature as a cone's
 apex does, and the piece often maps as one chart where a bisection made two (the bone scan of
@@ -139,6 +140,17 @@ CAP_INNER = 3.25
 #: ... and of one sign: the inner defects' sum at least this share of their absolute sum (a
 #: noisy scan's or a bunny's piece of 4-5 rad with saddles in it mapped within the targets).
 CAP_ONE_SIGN = 0.9
+#: A disk whose inner vertices' angle defects sum to at least this much (radians) misses the
+#: target whatever saddles it holds besides, and is cut before any solve too: its positive
+#: curvature alone is at least that, what a cap that misses it holds. Of the 4,012 pieces the
+#: split stage solved on 31 meshes (the quick set of ``bench_atlas.py``, the bunny, the range
+#: scan, the turned parts, ``data/brain.obj``, realistic brains of 2k-8k faces at several
+#: seeds), all 47 of 4.5 rad or more failed (the bone's three knobs, 6.8-7.3 rad, at L2 1.14; the
+#: cow's horns and ears), the most that passed held 4.23 (the cow's, L2 1.011); cutting them at
+#: once gave the same atlases on 37 meshes and 0.92x the time on the bone, 0.91x on the bunny
+#: (BENCHMARKS.md 0.1, session 24). Not its negative: saddle-shaped pieces of -4 to -6.3 rad
+#: mapped within the target (8 of 27; the range scan's -6.25 rad piece at L2 1.002).
+CAP_NET = 4.5
 #: A piece that fails again after a bisection (at this depth or deeper) and holds at least
 #: ``SLIT_MIN_CURVATURE`` radians at its inner vertices is first cut open along a slit
 #: (:func:`_slit_open`): the shortest edge path from its innermost vertex to its boundary, which
@@ -1270,17 +1282,22 @@ def _caps(
     cfg: SplitConfig,
 ) -> np.ndarray:
     """Per chart of a disjoint union (``vert_chart``: each vertex's chart), whether it is a cap
-    that will miss the stretch target (``CAP_CURVATURE``, ``CAP_INNER``, ``CAP_ONE_SIGN``): the
-    split stage cuts those without solving them. ``share()``: each chart's curvature with its
-    border's share (:func:`segparam.mesh.curvature_shares` summed over its faces), asked for
-    only when some chart holds enough curvature inside. Only under a stretch target of at most
-    ``MAX_STRETCH``, where the bounds were measured."""
+    that will miss the stretch target (``CAP_CURVATURE``, ``CAP_INNER``, ``CAP_ONE_SIGN``), or
+    holds so much positive curvature inside that it will, whatever saddles it holds besides
+    (``CAP_NET``): the split stage cuts those without solving them. ``share()``: each chart's
+    curvature with its border's share (:func:`segparam.mesh.curvature_shares` summed over its
+    faces), asked for only when some chart holds enough curvature inside. Only under a stretch
+    target of at most ``MAX_STRETCH``, where the bounds were measured."""
     limit = _stretch_limit(n_faces, cfg)
     if limit is None:
         return np.zeros(n_charts, dtype=bool)
     net, absolute = inner_curvature(V, F, vert_chart, n_charts)
-    inside = (limit <= MAX_STRETCH) & (net >= CAP_INNER) & (net >= CAP_ONE_SIGN * absolute)
-    return inside & (share() >= CAP_CURVATURE) if inside.any() else inside
+    within = limit <= MAX_STRETCH
+    folded = within & (net >= CAP_NET)  # whatever saddles it holds besides
+    inside = within & ~folded & (net >= CAP_INNER) & (net >= CAP_ONE_SIGN * absolute)
+    if inside.any():
+        inside &= share() >= CAP_CURVATURE
+    return folded | inside
 
 
 def _curvature_source(

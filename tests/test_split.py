@@ -480,16 +480,20 @@ def _halves(subdivisions):
     return V, F, (V[F].mean(axis=1)[:, 2] > 0).astype(np.int64)
 
 
-@pytest.mark.parametrize("subdivisions", [2, 4])  # solved in bulk (162 faces), alone (2,560)
-def test_caps_are_cut_without_a_solve_into_the_charts_a_solve_would_have_led_to(
-    monkeypatch, subdivisions
-):
-    # A hemisphere holds 2 pi of curvature, past any map within the stretch target: it is
-    # bisected at once, not solved first, and ends in the same charts as when it was solved.
-    import segparam.split as split
+def _bumpy_cap(subdivisions, degrees):
+    """The faces of an icosphere within ``degrees`` of its pole, every vertex moved radially by
+    1% noise (seeded): a cap whose inner defects hold saddles and bumps beside their net sum."""
+    m = trimesh.creation.icosphere(subdivisions)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    F = F[V[F].mean(axis=1)[:, 2] > np.cos(np.radians(degrees))]
+    used, F = np.unique(F, return_inverse=True)
+    rng = np.random.default_rng(0)
+    return V[used] * (1 + 0.01 * rng.standard_normal(len(used)))[:, None], F.reshape(-1, 3)
 
-    V, F, labels = _halves(subdivisions)
-    solved = []  # the face count of every piece solved, in bulk or alone
+
+def _recording_solves(monkeypatch, split):
+    """The face count of every piece the split stage solves from now on, in bulk or alone."""
+    solved = []
     in_bulk, alone = split.solve_charts, split._solved
 
     def record_bulk(V_, F_, vert_chart, **kw):
@@ -502,6 +506,19 @@ def test_caps_are_cut_without_a_solve_into_the_charts_a_solve_would_have_led_to(
 
     monkeypatch.setattr(split, "solve_charts", record_bulk)
     monkeypatch.setattr(split, "_solved", record_alone)
+    return solved
+
+
+@pytest.mark.parametrize("subdivisions", [2, 4])  # solved in bulk (162 faces), alone (2,560)
+def test_caps_are_cut_without_a_solve_into_the_charts_a_solve_would_have_led_to(
+    monkeypatch, subdivisions
+):
+    # A hemisphere holds 2 pi of curvature, past any map within the stretch target: it is
+    # bisected at once, not solved first, and ends in the same charts as when it was solved.
+    import segparam.split as split
+
+    V, F, labels = _halves(subdivisions)
+    solved = _recording_solves(monkeypatch, split)
     one = SplitConfig(n_jobs=1)  # every solve in this process, where it is recorded
     cs = parameterize_charts(V, F, labels, config=one)
     check_chart_set(V, F, cs)
@@ -511,11 +528,63 @@ def test_caps_are_cut_without_a_solve_into_the_charts_a_solve_would_have_led_to(
 
     solved.clear()
     monkeypatch.setattr(split, "CAP_CURVATURE", np.inf)  # no caps: the halves are solved first
+    monkeypatch.setattr(split, "CAP_NET", np.inf)
     plain = parameterize_charts(V, F, labels, config=one)
     assert set(halves) <= set(solved) and plain.first_pass_bijective.all()
     assert len(plain.charts) == len(cs.charts)
     for a, b in zip(plain.charts, cs.charts, strict=True):
         assert np.array_equal(a.faces, b.faces) and np.array_equal(a.uv, b.uv)
+
+
+@pytest.mark.parametrize(
+    "subdivisions, degrees",
+    [(3, 85), (4, 80)],  # 576 faces in bulk; 2,120 alone
+)
+def test_a_bumpy_cap_is_cut_without_a_solve_into_the_charts_a_solve_would_have_led_to(
+    monkeypatch, subdivisions, degrees
+):
+    # Over 5 rad of net curvature inside, but with saddles: the one-sign test of the caps does
+    # not take it (its net sum is about half its absolute sum or less); CAP_NET does. Solved
+    # first, it maps bijectively but over the stretch target and is bisected: the same charts.
+    import segparam.split as split
+    from segparam.mesh import inner_curvature
+
+    V, F = _bumpy_cap(subdivisions, degrees)
+    net, absolute = inner_curvature(V, F, np.zeros(len(V), dtype=np.int64), 1)
+    assert net[0] >= split.CAP_NET + 0.5 and net[0] < split.CAP_ONE_SIGN * absolute[0]
+    labels = np.zeros(len(F), dtype=np.int64)
+    one = SplitConfig(n_jobs=1)  # every solve in this process, where it is recorded
+    solved = _recording_solves(monkeypatch, split)
+    cs = parameterize_charts(V, F, labels, config=one)
+    check_chart_set(V, F, cs)
+    assert solved and len(F) not in solved and not cs.first_pass_bijective[0]  # never tried
+
+    solved.clear()
+    monkeypatch.setattr(split, "CAP_NET", np.inf)  # solved first
+    plain = parameterize_charts(V, F, labels, config=one)
+    assert len(F) in solved and plain.first_pass_bijective[0]  # bijective, over the target
+    assert len(plain.charts) == len(cs.charts) > 1
+    for a, b in zip(plain.charts, cs.charts, strict=True):
+        assert np.array_equal(a.faces, b.faces) and np.array_equal(a.uv, b.uv)
+
+
+def test_a_disk_of_negative_curvature_is_not_a_cap(monkeypatch):
+    # A monkey saddle holds 7 rad of negative curvature inside: pieces like it map within the
+    # stretch target (the range scan's -6.3 rad piece at L2 1.002), so it is solved first.
+    from scipy.spatial import Delaunay
+
+    import segparam.split as split
+
+    rings = 6
+    r = np.repeat(np.arange(1, rings + 1), 6 * np.arange(1, rings + 1)) / rings
+    theta = np.concatenate([np.arange(6 * k) * 2 * np.pi / (6 * k) for k in range(1, rings + 1)])
+    P = np.r_[[[0.0, 0.0]], np.c_[r * np.cos(theta), r * np.sin(theta)]]
+    F = Delaunay(P).simplices.astype(np.int64)
+    V = np.c_[P, 0.8 * np.real((P[:, 0] + 1j * P[:, 1]) ** 3)]
+    solved = _recording_solves(monkeypatch, split)
+    cs = parameterize_charts(V, F, np.zeros(len(F), dtype=np.int64), config=SplitConfig(n_jobs=1))
+    check_chart_set(V, F, cs)
+    assert len(F) in solved and cs.first_pass_bijective[0]
 
 
 def test_a_cap_within_reach_of_the_stretch_target_is_solved_whole():
