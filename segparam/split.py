@@ -1818,6 +1818,33 @@ def _slit_ready(
     return vertices, F_cut, copy_of
 
 
+def _slit_candidates(pieces: list[tuple], cfg: SplitConfig) -> np.ndarray:
+    """Per ``(V, F, faces, src, depth)`` in ``pieces``, whether :func:`_slit_ready` may cut it:
+    its depth, size and inner curvature tests, for all pieces at once (the inner curvature of
+    each piece from one union of their charts: a chart's vertices outside the piece hold no
+    defect). The split rounds hand over tens of failed pieces a round (the 2k brains): one by
+    one, the test cost 0.1-0.3 ms a piece; at once, the cow and the 2k brains build 1-2% faster
+    (the same atlases)."""
+    gate = np.array(
+        [SLIT_MIN_DEPTH <= depth <= cfg.max_depth and len(faces) >= STRETCH_MIN_FACES
+         for _, _, faces, _, depth in pieces], dtype=bool,
+    )  # fmt: skip
+    take = np.flatnonzero(gate)
+    if len(take) == 0:
+        return gate
+    n_v = np.array([len(pieces[k][0]) for k in take])
+    v_off = np.r_[0, np.cumsum(n_v)[:-1]]
+    V = np.concatenate([pieces[k][0] for k in take])
+    F = np.concatenate(
+        [pieces[k][1][pieces[k][2]] + v_off[j] for j, k in enumerate(take)]
+    )  # loop over the gated pieces: their faces in the union
+    net, absolute = inner_curvature(V, F, np.repeat(np.arange(len(take)), n_v), len(take))
+    # _slit_ready tests each candidate exactly again; this only must not drop one it would take
+    slack = 1e-9
+    gate[take] = net >= np.maximum(SLIT_MIN_CURVATURE, SLIT_ONE_SIGN * absolute) - slack
+    return gate
+
+
 def _slit_open(
     V: np.ndarray, F: np.ndarray, faces: np.ndarray, src: int, depth: int, cfg: SplitConfig,
     seed: int,
@@ -1847,7 +1874,10 @@ def _slit_charts(
     :func:`_bulk_charts` solves the tubes it cuts open), the others alone."""
     out: list[Chart | None] = [None] * len(pieces)
     batch = []
+    maybe = _slit_candidates(pieces, cfg)
     for k, (V, F, faces, src, depth) in enumerate(pieces):  # loop over the failed pieces
+        if not maybe[k]:
+            continue
         ready = _slit_ready(V, F, faces, depth, cfg)
         if ready is None:
             continue

@@ -6,7 +6,7 @@ from meshes import folded_strip, plate_with_holes, tri_grid
 from segparam.errors import ConfigError, InvalidMeshError
 from segparam.mesh import boundary_edges
 from segparam.quality import chart_quality
-from segparam.segment import segment
+from segparam.segment import divide, segment
 from segparam.split import SplitConfig, chart_face_cover, parameterize_charts, project_chart
 
 
@@ -680,6 +680,39 @@ def _with_slits(monkeypatch, on):
     import segparam.split as split
 
     monkeypatch.setattr(split, "SLIT_MIN_DEPTH", 1 if on else 10**6)
+
+
+def test_slit_candidates_at_once_are_the_pieces_the_one_by_one_test_takes():
+    # The batched screen of the failed pieces (their inner curvature from one union of their
+    # charts) against the curvature test of each piece alone, on the pieces of a folded
+    # surface's charts cut in quarters, at depths in and out of the slit range.
+    import segparam.split as split
+    from segparam.mesh import inner_curvature, submesh
+    from segparam.synthetic import brain_like_surface
+
+    V, F = brain_like_surface(2000, seed=1)
+    seg = segment(V, F)
+    W = seg.affinity
+    pieces, want = [], []
+    for c in range(seg.n_charts):  # loop over the charts: quarters of each
+        faces = np.flatnonzero(seg.labels == c)
+        vertices, local_F = submesh(F, faces)
+        where = np.full(len(F), -1)
+        where[faces] = np.arange(len(faces))
+        for half in divide(W, faces, seed=0):
+            for quarter in divide(W, half, seed=0) if len(half) > 1 else [half]:
+                depth = 2 if len(pieces) % 5 else SplitConfig().max_depth + 1  # too deep
+                pieces.append((V[vertices], local_F, where[quarter], c, depth))
+                Vq, Fq = submesh(local_F, where[quarter])
+                net, absolute = inner_curvature(
+                    V[vertices][Vq], Fq, np.zeros(len(Vq), dtype=np.int64), 1
+                )
+                inside = net[0] >= max(split.SLIT_MIN_CURVATURE, split.SLIT_ONE_SIGN * absolute[0])
+                deep = split.SLIT_MIN_DEPTH <= depth <= SplitConfig().max_depth
+                want.append(bool(inside and deep and len(quarter) >= split.STRETCH_MIN_FACES))
+    got = split._slit_candidates(pieces, SplitConfig())
+    assert got.tolist() == want
+    assert 0 < sum(want) < len(want)  # some pieces are candidates, some are not
 
 
 def test_a_knob_whose_halves_fail_gets_a_slit_instead_of_a_second_bisection(monkeypatch):
