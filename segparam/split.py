@@ -145,11 +145,12 @@ CAP_ONE_SIGN = 0.9
 #: curvature alone is at least that, what a cap that misses it holds. Of the 4,012 pieces the
 #: split stage solved on 31 meshes (the quick set of ``bench_atlas.py``, the bunny, the range
 #: scan, the turned parts, ``data/brain.obj``, realistic brains of 2k-8k faces at several
-#: seeds), all 47 of 4.5 rad or more failed (the bone's three knobs, 6.8-7.3 rad, at L2 1.14; the
-#: cow's horns and ears), the most that passed held 4.23 (the cow's, L2 1.011); cutting them at
-#: once gave the same atlases on 37 meshes and 0.92x the time on the bone, 0.91x on the bunny
-#: (BENCHMARKS.md 0.1, session 24). Not its negative: saddle-shaped pieces of -4 to -6.3 rad
-#: mapped within the target (8 of 27; the range scan's -6.25 rad piece at L2 1.002).
+#: seeds), all 47 of 4.5 rad or more failed (the bone's three knobs, 6.8-7.3 rad, at L2 1.14;
+#: the cow's pieces of 84-89 faces, 7.3-8.3 rad), the most that passed held 4.23 (L2 1.011);
+#: cutting them at once gave the same atlases on 37 meshes and 0.92x the time on the bone,
+#: 0.91x on the bunny (BENCHMARKS.md 0.1, session 24). Not its negative: saddle-shaped pieces
+#: of -4 to -6.3 rad mapped within the target (8 of 27; the range scan's -6.25 rad piece at L2
+#: 1.002).
 CAP_NET = 4.5
 #: A piece that fails again after a bisection (at this depth or deeper) and holds at least
 #: ``SLIT_MIN_CURVATURE`` radians at its inner vertices is first cut open along a slit
