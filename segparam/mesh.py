@@ -380,6 +380,29 @@ def angle_defect(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     return np.where(used, full - total, 0.0)
 
 
+def cotan_laplacian(V: np.ndarray, F: np.ndarray, *, angles: np.ndarray | None = None):
+    """The cotangent Laplacian, positive semi-definite: ``(L u)_i = sum_j w_ij (u_i - u_j)`` with
+    ``w_ij = (cot a + cot b) / 2`` over the angles opposite edge ``ij`` (one angle on a boundary
+    edge): the stiffness matrix of linear finite elements, so positive semi-definite whatever
+    the angles. Corners are clipped to ``[1e-8, pi - 1e-8]`` (a degenerate triangle gets a large
+    finite weight). ``angles`` (:func:`corner_angles`) may be passed when the caller has them.
+
+    Returns
+    -------
+    (n, n) scipy.sparse.csr_matrix
+    """
+    if angles is None:
+        angles = corner_angles(V, F)
+    w = 0.5 / np.tan(np.clip(angles, 1e-8, np.pi - 1e-8))  # (m, 3): corner k's opposite edge
+    i = F[:, [1, 2, 0]].ravel()  # the edge opposite corner k joins corners k + 1 and k + 2
+    j = F[:, [2, 0, 1]].ravel()
+    w = w.ravel()
+    n = len(V)
+    rows = np.concatenate([i, j, i, j])
+    cols = np.concatenate([j, i, i, j])
+    return sp.csr_matrix((np.concatenate([-w, -w, w, w]), (rows, cols)), shape=(n, n))
+
+
 def interior_defect(
     V: np.ndarray,
     F: np.ndarray,

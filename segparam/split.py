@@ -23,8 +23,10 @@ loops, it is bisected as any chart.
 
 Curvature decides two shortcuts. A cap, a disk holding more curvature of one sign than any map
 within the stretch target allows (the halves of small spheres, ``CAP_CURVATURE``), or more
-positive curvature inside whatever saddles it holds besides (a bone's knob, ``CAP_NET``), is
-bisected without being solved first (:func:`_caps`). A knob-like piece that fails again after a
+positive curvature inside whatever saddles it holds besides (a bone's knob, ``CAP_NET``), or a
+disk whose least-distorting conformal flattening stretches far past the target (a folded piece
+of a coarse brain, ``CONFORMAL_STRETCH_CUT``), is bisected without being solved first
+(:func:`_caps`). A knob-like piece that fails again after a
 bisection is first cut along a slit from its innermost vertex to its rim and solved once more
 (:func:`_slit_charts`, ``SLIT_MIN_CURVATURE``): the slit's tip takes up curvature as a cone's
 apex does, and the piece often maps as one chart where a bisection made two (the bone scan of
@@ -64,13 +66,14 @@ import scipy.sparse as sp
 
 from .cores import Helpers, limit_blas, may_start_processes, stop_pool
 from .errors import InvalidMeshError, check_choice, check_int, check_number
-from .linalg import DENSE_LIMIT
+from .linalg import DENSE_LIMIT, spd_solver
 from .mesh import (
     annulus_cut,
     boundary_edges,
     boundary_pieces,
     check_mesh,
     corner_angles,
+    cotan_laplacian,
     curvature_shares,
     cut_along,
     disk_labels,
@@ -78,6 +81,7 @@ from .mesh import (
     face_normals,
     group_by_label,
     inner_curvature,
+    interior_defect,
     is_disk,
     label_topology,
     mesh_arrays,
@@ -152,6 +156,16 @@ CAP_ONE_SIGN = 0.9
 #: of -4 to -6.3 rad mapped within the target (8 of 27; the range scan's -6.25 rad piece at L2
 #: 1.002).
 CAP_NET = 4.5
+#: A disk whose conformal flattening of least area distortion (:func:`_conformal_stretch`)
+#: stretches at least this much (Sander's L2) misses the target too, and is cut before any
+#: solve: the solver's refined maps lean conformal (``angle_weight``), and they stretch less
+#: than that flattening by a margin, never past it. Of the 4,602 pieces the split stage solved on
+#: 28 meshes (the quick set of ``bench_atlas.py``, the bunny, the range scan, the turned parts,
+#: ``data/brain.obj``, realistic brains of 2k-8k faces at several seeds) the most stretched
+#: flattening of a piece that met the target was at 1.051 (the bunny with holes', mapped at
+#: 1.0184); from 1.06 up all 481 missed it (66% of the faces solved in vain), from 1.08 all 379
+#: (53%). At 1.08 the margin over 1.051 is half the excess again. BENCHMARKS.md 0.1, session 24.
+CONFORMAL_STRETCH_CUT = 1.08
 #: A piece that fails again after a bisection (at this depth or deeper) and holds at least
 #: ``SLIT_MIN_CURVATURE`` radians at its inner vertices is first cut open along a slit
 #: (:func:`_slit_open`): the shortest edge path from its innermost vertex to its boundary, which
@@ -386,7 +400,9 @@ class ChartSet:
     splits : (s,) int64 ndarray
         Number of bisections each segmentation chart needed (``len(pieces) - 1``).
     first_pass_bijective : (s,) bool ndarray
-        Whether the solver mapped each segmentation chart bijectively on its first try.
+        Whether the solver mapped each segmentation chart bijectively on its first try (False
+        for a chart cut without a try: one that would miss the stretch target, see
+        :func:`_caps`).
     """
 
     charts: tuple[Chart, ...]
@@ -1120,7 +1136,7 @@ def _bulk_charts(
         def share() -> np.ndarray:
             return np.bincount(lab, weights=curvature()[order], minlength=n_src)[cand]
 
-        capped = go & one_loop & _caps(Vu, Fu, vert_chart, len(cand), share, nf[cand], cfg)
+        capped = _caps(Vu, Fu, vert_chart, len(cand), share, nf[cand], cfg, go & one_loop)
         go &= ~capped
         if rejected is not None:
             rejected[cand[capped]] = True
@@ -1281,24 +1297,70 @@ def _caps(
     share: Callable[[], np.ndarray],
     n_faces: np.ndarray,
     cfg: SplitConfig,
+    disks: np.ndarray,
 ) -> np.ndarray:
-    """Per chart of a disjoint union (``vert_chart``: each vertex's chart), whether it is a cap
-    that will miss the stretch target (``CAP_CURVATURE``, ``CAP_INNER``, ``CAP_ONE_SIGN``), or
-    holds so much positive curvature inside that it will, whatever saddles it holds besides
-    (``CAP_NET``): the split stage cuts those without solving them. ``share()``: each chart's
-    curvature with its border's share (:func:`segparam.mesh.curvature_shares` summed over its
-    faces), asked for only when some chart holds enough curvature inside. Only under a stretch
-    target of at most ``MAX_STRETCH``, where the bounds were measured."""
+    """Per chart of a disjoint union (``vert_chart``: each vertex's chart), whether it is one of
+    the ``disks`` that will miss the stretch target: a cap (``CAP_CURVATURE``, ``CAP_INNER``,
+    ``CAP_ONE_SIGN``), a disk holding so much positive curvature inside that it will, whatever
+    saddles it holds besides (``CAP_NET``), or one whose least-distorting conformal flattening
+    stretches too much (``CONFORMAL_STRETCH_CUT``): the split stage cuts those without solving
+    them. ``share()``: each chart's curvature with its border's share
+    (:func:`segparam.mesh.curvature_shares` summed over its faces), asked for only when some
+    chart holds enough curvature inside. Only under a stretch target of at most
+    ``MAX_STRETCH``, where the bounds were measured."""
     limit = _stretch_limit(n_faces, cfg)
     if limit is None:
         return np.zeros(n_charts, dtype=bool)
     net, absolute = inner_curvature(V, F, vert_chart, n_charts)
-    within = limit <= MAX_STRETCH
+    within = disks & (limit <= MAX_STRETCH)
     folded = within & (net >= CAP_NET)  # whatever saddles it holds besides
     inside = within & ~folded & (net >= CAP_INNER) & (net >= CAP_ONE_SIGN * absolute)
     if inside.any():
         inside &= share() >= CAP_CURVATURE
-    return folded | inside
+    rest = within & ~folded & ~inside
+    if rest.any():
+        rest &= _conformal_stretch(V, F, vert_chart, n_charts, rest) >= CONFORMAL_STRETCH_CUT
+    return folded | inside | rest
+
+
+def _conformal_stretch(
+    V: np.ndarray, F: np.ndarray, vert_chart: np.ndarray, n_charts: int, which: np.ndarray
+) -> np.ndarray:
+    """Per chart of a disjoint union, the L2 stretch (Sander's) of its conformal flattening with
+    the least area distortion, for the disks ``which`` (1 for the others).
+
+    A conformal flattening scales the metric by ``exp(2 u)``, where ``L u = K`` inside (``L``
+    the cotangent Laplacian, ``K`` the inner vertices' angle defects: the flat metric's
+    curvature is 0); of all of them, ``u = 0`` on the boundary spreads the least area distortion
+    (Sawhney and Crane's boundary first flattening keeps the boundary's lengths). A face whose
+    area scales by ``s`` then stretches by ``1 / sqrt(s)`` both ways, and at equal total areas
+    the chart's L2 stretch is ``sqrt(sum(A / s) sum(A s)) / sum(A)`` (1 for an isometry, by
+    Cauchy-Schwarz). One sparse Cholesky factorization for all of the disks at once.
+
+    References
+    ----------
+    R. Sawhney, K. Crane, Boundary First Flattening, ACM TOG 37(1), 2017.
+    """
+    out = np.ones(n_charts)
+    face_chart = vert_chart[F[:, 0]]
+    sel = which[face_chart]
+    Fw, fc = F[sel], face_chart[sel]
+    angles = corner_angles(V, Fw)
+    K = interior_defect(V, Fw, angles=angles)[0]
+    inner = np.bincount(Fw.ravel(), minlength=len(V)) > 0
+    inner[boundary_edges(Fw).ravel()] = False
+    u = np.zeros(len(V))
+    if inner.any():
+        L = cotan_laplacian(V, Fw, angles=angles)[inner][:, inner]
+        u[inner] = spd_solver(L)(K[inner])
+    # a face's area factor; the clip only keeps a degenerate piece's factor finite (it is cut)
+    s = np.exp(np.clip(2.0 * u[Fw].mean(axis=1), -50.0, 50.0))
+    A = face_areas(V, Fw)
+    total = np.bincount(fc, weights=A, minlength=n_charts)
+    shrink = np.bincount(fc, weights=A / s, minlength=n_charts)
+    grow = np.bincount(fc, weights=A * s, minlength=n_charts)
+    out[which] = np.sqrt(shrink[which] * grow[which]) / total[which]
+    return out
 
 
 def _curvature_source(
@@ -1334,7 +1396,7 @@ def _pieces_capped(
     def share() -> np.ndarray:
         return np.add.reduceat(curvature()[order], bounds[:-1])
 
-    return disk & _caps(V[vertices], Fu, vert_chart, len(pieces), share, sizes, cfg)
+    return _caps(V[vertices], Fu, vert_chart, len(pieces), share, sizes, cfg, disk)
 
 
 def _tubes(V: np.ndarray, F: np.ndarray, face_chart: np.ndarray, n_charts: int) -> np.ndarray:

@@ -471,3 +471,27 @@ def test_a_slit_runs_from_the_innermost_vertex_to_the_nearest_rim_vertex():
     length = np.linalg.norm(V[cut[:, 0]] - V[cut[:, 1]], axis=1).sum()
     assert length == pytest.approx(to_rim[inner])  # and the shortest way out
     assert mesh.slit_cut(V, F[:1]).shape == (0, 2)  # one triangle: no inner vertex
+
+
+def test_cotan_laplacian_is_symmetric_semidefinite_and_exact_on_linear_functions():
+    # The finite-element stiffness matrix: symmetric, rows summing to 0, positive semi-definite
+    # (obtuse corners included: a jittered grid), and linear functions on a planar mesh are
+    # harmonic at its inner vertices (the cotangent formula's linear precision).
+    V, F = tri_grid(9, 8)
+    rng = np.random.default_rng(3)
+    V[:, :2] += rng.uniform(-0.03, 0.03, (len(V), 2))
+    L = mesh.cotan_laplacian(V, F)
+    dense = L.toarray()
+    assert np.allclose(dense, dense.T, atol=0) and np.abs(dense.sum(axis=1)).max() < 1e-12
+    assert np.linalg.eigvalsh(dense).min() > -1e-12
+    assert (mesh.corner_angles(V, F) > np.pi / 2).any()  # some obtuse corners
+    inner = np.ones(len(V), dtype=bool)
+    inner[mesh.boundary_edges(F).ravel()] = False
+    for f in (V[:, 0], V[:, 1], 2 * V[:, 0] - 3 * V[:, 1] + 1):
+        assert np.abs((L @ f)[inner]).max() < 1e-12
+    # one triangle: each edge's weight is half the cotangent of the corner opposite it
+    V1 = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    L1 = mesh.cotan_laplacian(V1, np.array([[0, 1, 2]])).toarray()
+    # the corner at vertex 0 is a right angle: edge 1-2 gets 0; at vertex 1, cot = 2, edge 0-2
+    assert L1[1, 2] == pytest.approx(0.0, abs=1e-12)
+    assert L1[0, 2] == pytest.approx(-0.5 * 2.0) and L1[0, 1] == pytest.approx(-0.5 * 0.5)

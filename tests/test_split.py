@@ -529,9 +529,96 @@ def test_caps_are_cut_without_a_solve_into_the_charts_a_solve_would_have_led_to(
     solved.clear()
     monkeypatch.setattr(split, "CAP_CURVATURE", np.inf)  # no caps: the halves are solved first
     monkeypatch.setattr(split, "CAP_NET", np.inf)
+    monkeypatch.setattr(split, "CONFORMAL_STRETCH_CUT", np.inf)
     plain = parameterize_charts(V, F, labels, config=one)
     assert set(halves) <= set(solved) and plain.first_pass_bijective.all()
     assert len(plain.charts) == len(cs.charts)
+    for a, b in zip(plain.charts, cs.charts, strict=True):
+        assert np.array_equal(a.faces, b.faces) and np.array_equal(a.uv, b.uv)
+
+
+def _polar_disk(rings):
+    """A unit disk in the z = 0 plane: rings of 6 k points about its centre, triangulated."""
+    from scipy.spatial import Delaunay
+
+    r = np.repeat(np.arange(1, rings + 1), 6 * np.arange(1, rings + 1)) / rings
+    theta = np.concatenate([np.arange(6 * k) * 2 * np.pi / (6 * k) for k in range(1, rings + 1)])
+    P = np.r_[[[0.0, 0.0]], np.c_[r * np.cos(theta), r * np.sin(theta)]]
+    return np.c_[P, np.zeros(len(P))], Delaunay(P).simplices.astype(np.int64)
+
+
+def _cap_of(V, F, degrees):
+    """The faces of a unit sphere's mesh within ``degrees`` of its pole, on their own vertices."""
+    cap = F[V[F].mean(axis=1)[:, 2] > np.cos(np.radians(degrees))]
+    used, cap = np.unique(cap, return_inverse=True)
+    return V[used], cap.reshape(-1, 3)
+
+
+def test_conformal_stretch_is_that_of_the_stereographic_map_on_a_spherical_cap():
+    # On a cap of the unit sphere the conformal flattening with u = 0 on the rim is the
+    # stereographic projection, rescaled: area factor ((1 + r^2) / (1 + r0^2))^2 at r = tan(t /
+    # 2). Its L2 stretch by quadrature against the discrete one, on caps of 60 and 80 degrees;
+    # two caps in one union get their own values; a flat disk flattens without stretch.
+    from scipy.integrate import quad
+
+    import segparam.split as split
+
+    def stereographic(t0):
+        r0 = np.tan(t0 / 2)
+
+        def s(t):
+            return ((1 + np.tan(t / 2) ** 2) / (1 + r0**2)) ** 2
+
+        area = quad(np.sin, 0, t0)[0]
+        shrink = quad(lambda t: np.sin(t) / s(t), 0, t0)[0]
+        grow = quad(lambda t: np.sin(t) * s(t), 0, t0)[0]
+        return np.sqrt(shrink * grow) / area
+
+    def stretch(V, F, vert_chart, which):
+        return split._conformal_stretch(V, F, vert_chart, len(which), np.asarray(which))
+
+    m = trimesh.creation.icosphere(4)
+    caps = [_cap_of(np.asarray(m.vertices), np.asarray(m.faces), d) for d in (60, 80)]
+    for Vc, Fc in caps:
+        rim = np.unique(boundary_edges(Fc))
+        t0 = np.arccos(Vc[rim, 2]).mean()  # the rim's mean angle from the pole
+        got = stretch(Vc, Fc, np.zeros(len(Vc), dtype=np.int64), [True])[0]
+        assert got - 1 == pytest.approx(stereographic(t0) - 1, rel=0.03)
+    (V0, F0), (V1, F1) = caps
+    Vu, Fu = np.concatenate([V0, V1]), np.concatenate([F0, F1 + len(V0)])
+    vc = np.repeat([0, 1], [len(V0), len(V1)])
+    both = stretch(Vu, Fu, vc, [True, True])
+    one = stretch(Vu, Fu, vc, [False, True])
+    assert one[0] == 1.0 and one[1] == pytest.approx(both[1], rel=1e-12)
+    assert 1.01 < both[0] < both[1] < 1.06
+    Vd, Fd = _polar_disk(6)
+    assert stretch(Vd, Fd, np.zeros(len(Vd), dtype=np.int64), [True])[0] == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("height, cut", [(0.8, True), (0.3, False)])
+def test_a_bump_too_stretched_to_map_is_cut_without_a_solve(monkeypatch, height, cut):
+    # A Gaussian bump on a disk holds no net curvature inside (its top's and its skirt's
+    # cancel), so no curvature rule takes it; a tall one's conformal flattening stretches by
+    # 1.39, far past any map within the target: it is cut at once, into the charts its solve
+    # leads to. A low one (1.008) is solved, and kept whole.
+    import segparam.split as split
+
+    V, F = _polar_disk(8)
+    V[:, 2] = height * np.exp(-(V[:, 0] ** 2 + V[:, 1] ** 2) / 0.3**2)
+    labels = np.zeros(len(F), dtype=np.int64)
+    one = SplitConfig(n_jobs=1)
+    solved = _recording_solves(monkeypatch, split)
+    cs = parameterize_charts(V, F, labels, config=one)
+    check_chart_set(V, F, cs)
+    assert (len(F) not in solved) == cut and cs.first_pass_bijective[0] == (not cut)
+    if not cut:
+        assert len(cs.charts) == 1
+        return
+    solved.clear()
+    monkeypatch.setattr(split, "CONFORMAL_STRETCH_CUT", np.inf)  # solved first
+    plain = parameterize_charts(V, F, labels, config=one)
+    assert len(F) in solved and plain.first_pass_bijective[0]
+    assert len(plain.charts) == len(cs.charts) > 1
     for a, b in zip(plain.charts, cs.charts, strict=True):
         assert np.array_equal(a.faces, b.faces) and np.array_equal(a.uv, b.uv)
 
@@ -571,16 +658,10 @@ def test_a_bumpy_cap_is_cut_without_a_solve_into_the_charts_a_solve_would_have_l
 def test_a_disk_of_negative_curvature_is_not_a_cap(monkeypatch):
     # A monkey saddle holds 7 rad of negative curvature inside: pieces like it map within the
     # stretch target (the range scan's -6.3 rad piece at L2 1.002), so it is solved first.
-    from scipy.spatial import Delaunay
-
     import segparam.split as split
 
-    rings = 6
-    r = np.repeat(np.arange(1, rings + 1), 6 * np.arange(1, rings + 1)) / rings
-    theta = np.concatenate([np.arange(6 * k) * 2 * np.pi / (6 * k) for k in range(1, rings + 1)])
-    P = np.r_[[[0.0, 0.0]], np.c_[r * np.cos(theta), r * np.sin(theta)]]
-    F = Delaunay(P).simplices.astype(np.int64)
-    V = np.c_[P, 0.8 * np.real((P[:, 0] + 1j * P[:, 1]) ** 3)]
+    V, F = _polar_disk(6)
+    V[:, 2] = 0.8 * np.real((V[:, 0] + 1j * V[:, 1]) ** 3)
     solved = _recording_solves(monkeypatch, split)
     cs = parameterize_charts(V, F, np.zeros(len(F), dtype=np.int64), config=SplitConfig(n_jobs=1))
     check_chart_set(V, F, cs)
