@@ -1352,7 +1352,12 @@ def _conformal_stretch(
     u = np.zeros(len(V))
     if inner.any():
         L = cotan_laplacian(V, Fw, angles=angles)[inner][:, inner]
-        u[inner] = spd_solver(L)(K[inner])
+        try:
+            u[inner] = spd_solver(L)(K[inner])
+        except (ArithmeticError, RuntimeError, np.linalg.LinAlgError):  # singular: no bound
+            return out
+        if not np.isfinite(u).all():
+            return out
     # a face's area factor; the clip only keeps a degenerate piece's factor finite (it is cut)
     s = np.exp(np.clip(2.0 * u[Fw].mean(axis=1), -50.0, 50.0))
     A = face_areas(V, Fw)
