@@ -380,27 +380,47 @@ def angle_defect(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     return np.where(used, full - total, 0.0)
 
 
+def cotan_weights(
+    V: np.ndarray,
+    F: np.ndarray,
+    *,
+    angles: np.ndarray | None = None,
+    edge_index: tuple | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every edge's cotangent weight ``(cot a + cot b) / 2`` over the angles opposite it (one
+    angle on a boundary edge), corners clipped to ``[1e-8, pi - 1e-8]`` (a degenerate triangle
+    gets a large finite weight). ``angles`` (:func:`corner_angles`) and ``edge_index``
+    (:func:`edges`) may be passed when the caller has them.
+
+    Returns
+    -------
+    E : (e, 2) int64 ndarray
+        The edges, as :func:`edges` gives them.
+    w : (e,) float64 ndarray
+    """
+    if angles is None:
+        angles = corner_angles(V, F)
+    E, h2e = edges(F) if edge_index is None else edge_index
+    # half-edge 3 f + k runs from corner k to corner k + 1: the corner opposite it is k + 2
+    half = 0.5 / np.tan(np.clip(angles[:, [2, 0, 1]].ravel(), 1e-8, np.pi - 1e-8))
+    return E, np.bincount(h2e, weights=half, minlength=len(E))
+
+
 def cotan_laplacian(V: np.ndarray, F: np.ndarray, *, angles: np.ndarray | None = None):
     """The cotangent Laplacian, positive semi-definite: ``(L u)_i = sum_j w_ij (u_i - u_j)`` with
-    ``w_ij = (cot a + cot b) / 2`` over the angles opposite edge ``ij`` (one angle on a boundary
-    edge): the stiffness matrix of linear finite elements, so positive semi-definite whatever
-    the angles. Corners are clipped to ``[1e-8, pi - 1e-8]`` (a degenerate triangle gets a large
-    finite weight). ``angles`` (:func:`corner_angles`) may be passed when the caller has them.
+    the weights of :func:`cotan_weights`: the stiffness matrix of linear finite elements, so
+    positive semi-definite whatever the angles.
 
     Returns
     -------
     (n, n) scipy.sparse.csr_matrix
     """
-    if angles is None:
-        angles = corner_angles(V, F)
-    w = 0.5 / np.tan(np.clip(angles, 1e-8, np.pi - 1e-8))  # (m, 3): corner k's opposite edge
-    i = F[:, [1, 2, 0]].ravel()  # the edge opposite corner k joins corners k + 1 and k + 2
-    j = F[:, [2, 0, 1]].ravel()
-    w = w.ravel()
+    E, w = cotan_weights(V, F, angles=angles)
     n = len(V)
-    rows = np.concatenate([i, j, i, j])
-    cols = np.concatenate([j, i, i, j])
-    return sp.csr_matrix((np.concatenate([-w, -w, w, w]), (rows, cols)), shape=(n, n))
+    degree = np.bincount(E.ravel(), weights=np.repeat(w, 2), minlength=n)
+    rows = np.concatenate([E[:, 0], E[:, 1], np.arange(n)])
+    cols = np.concatenate([E[:, 1], E[:, 0], np.arange(n)])
+    return sp.csr_matrix((np.concatenate([-w, -w, degree]), (rows, cols)), shape=(n, n))
 
 
 def interior_defect(

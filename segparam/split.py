@@ -73,15 +73,15 @@ from .mesh import (
     boundary_pieces,
     check_mesh,
     corner_angles,
-    cotan_laplacian,
+    cotan_weights,
     curvature_shares,
     cut_along,
     disk_labels,
+    edges,
     face_areas,
     face_normals,
     group_by_label,
     inner_curvature,
-    interior_defect,
     is_disk,
     label_topology,
     mesh_arrays,
@@ -1346,12 +1346,24 @@ def _conformal_stretch(
     sel = which[face_chart]
     Fw, fc = F[sel], face_chart[sel]
     angles = corner_angles(V, Fw)
-    K = interior_defect(V, Fw, angles=angles)[0]
+    edge_index = edges(Fw)
+    E, w = cotan_weights(V, Fw, angles=angles, edge_index=edge_index)
     inner = np.bincount(Fw.ravel(), minlength=len(V)) > 0
-    inner[boundary_edges(Fw).ravel()] = False
+    inner[boundary_edges(Fw, edge_index=edge_index).ravel()] = False
     u = np.zeros(len(V))
     if inner.any():
-        L = cotan_laplacian(V, Fw, angles=angles)[inner][:, inner]
+        # the Laplacian's rows and columns of the inner vertices only (the rim's u is 0)
+        at = np.cumsum(inner) - 1
+        K = 2 * np.pi - np.bincount(Fw.ravel(), weights=angles.ravel(), minlength=len(V))
+        both = inner[E[:, 0]] & inner[E[:, 1]]
+        i, j = at[E[both, 0]], at[E[both, 1]]
+        diag = np.bincount(E.ravel(), weights=np.repeat(w, 2), minlength=len(V))[inner]
+        m = int(inner.sum())
+        L = sp.csc_matrix(
+            (np.concatenate([-w[both], -w[both], diag]),
+             (np.concatenate([i, j, np.arange(m)]), np.concatenate([j, i, np.arange(m)]))),
+            shape=(m, m),
+        )  # fmt: skip
         try:
             u[inner] = spd_solver(L)(K[inner])
         except (ArithmeticError, RuntimeError, np.linalg.LinAlgError):  # singular: no bound
