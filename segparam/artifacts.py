@@ -121,6 +121,11 @@ def charts_to_arrays(charts: ChartSet) -> dict[str, np.ndarray]:
         "chart_method": np.array([c.method for c in cs], dtype="U16"),
         "splits": charts.splits.astype(np.int64),
         "first_pass_bijective": charts.first_pass_bijective.astype(bool),
+        **(
+            {}
+            if charts.cut_untried is None
+            else {"cut_untried": np.asarray(charts.cut_untried, dtype=bool)}
+        ),
     }
 
 
@@ -149,4 +154,5 @@ def charts_from_arrays(V: np.ndarray, a: dict[str, np.ndarray]) -> ChartSet:
         charts=tuple(charts),
         splits=a["splits"],
         first_pass_bijective=a["first_pass_bijective"],
+        cut_untried=a.get("cut_untried"),  # None in the files of earlier versions
     )

@@ -266,6 +266,7 @@ def _cmd_parameterize(args: argparse.Namespace) -> int:
         "stage": "parameterize",
         "charts": len(cs.charts),
         "first_pass_bijective": int(cs.first_pass_bijective.sum()),
+        "cut_untried": int(cs.cut_untried.sum()),
         "splits": int(cs.splits.sum()),
     }
     arrays = {"V": a["V"], "F": a["F"], **charts_to_arrays(cs)}
@@ -356,9 +357,11 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
         if removed:
             print(f"  cleaning removed {removed} faces (listed in report.json)")
         seg = r["segmentation"]
+        untried = seg.get("cut_untried") or 0
         print(
             f"  charts {a['charts']} (segmentation {seg['charts']}, "
-            f"{seg['first_pass_bijective']} bijective on the first pass)"
+            f"{seg['first_pass_bijective']} bijective on the first pass"
+            + (f", {untried} cut before a solve)" if untried else ")")
         )
         print(
             f"  bijective charts {a['bijective_charts']}/{a['charts']}  flipped triangles "

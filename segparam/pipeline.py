@@ -320,6 +320,11 @@ def _versions() -> dict[str, str]:
     return out
 
 
+def _cut_untried(charts: ChartSet) -> int | None:
+    """How many segmentation charts the split stage cut before any solve (None: not recorded)."""
+    return None if charts.cut_untried is None else int(charts.cut_untried.sum())
+
+
 def build_report(atlas: Atlas) -> dict[str, Any]:
     """Per-chart and global figures of an atlas (see the README's "Outputs")."""
     # Figures are computed in the unit frame (scale-free ones as they are, areas and lengths
@@ -375,6 +380,7 @@ def build_report(atlas: Atlas) -> dict[str, Any]:
             else atlas.segmentation.target_charts,
             "curvature": None if atlas.segmentation is None else atlas.segmentation.curvature,
             "first_pass_bijective": int(atlas.charts.first_pass_bijective.sum()),
+            "cut_untried": _cut_untried(atlas.charts),
             "copies": 0 if atlas.segmentation is None else atlas.segmentation.copies,
         },
         "atlas": {
@@ -798,12 +804,16 @@ def _parameterize_once(
     charts = [dataclasses.replace(c, source=int(labels[c.faces[0]])) for c in charts]
     charts = replicate(charts, repeats, chosen, len(F), len(V), labels)
     n = int(labels.max()) + 1
-    first = np.zeros(n, dtype=bool)
+    first, cut = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
     first[labels[solved]] = part.first_pass_bijective[sub_labels.reshape(-1)]
+    cut[labels[solved]] = part.cut_untried[sub_labels.reshape(-1)]
     for faces, c in zip(repeats.faces, chosen, strict=True):  # loop over groups
         first[labels[faces]] = first[labels[faces[c]]][None, :]
+        cut[labels[faces]] = cut[labels[faces[c]]][None, :]
     splits = np.bincount([c.source for c in charts], minlength=n) - 1
-    chart_set = ChartSet(charts=tuple(charts), splits=splits, first_pass_bijective=first)
+    chart_set = ChartSet(
+        charts=tuple(charts), splits=splits, first_pass_bijective=first, cut_untried=cut
+    )
     copies = repeats.n_pieces - len(repeats.faces)
     log.info("instances: %d pieces charted as copies of %d parts", copies, len(repeats.faces))
     return chart_set, dataclasses.replace(seg, labels=labels, n_charts=n, copies=copies)

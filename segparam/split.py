@@ -401,13 +401,17 @@ class ChartSet:
         Number of bisections each segmentation chart needed (``len(pieces) - 1``).
     first_pass_bijective : (s,) bool ndarray
         Whether the solver mapped each segmentation chart bijectively on its first try (False
-        for a chart cut without a try: one that would miss the stretch target, see
-        :func:`_caps`).
+        for a chart cut without a try).
+    cut_untried : (s,) bool ndarray or None
+        The segmentation charts cut before any solve, because no map of them would meet the
+        stretch target (:func:`_caps`); None where not recorded (stage files of earlier
+        versions).
     """
 
     charts: tuple[Chart, ...]
     splits: np.ndarray
     first_pass_bijective: np.ndarray
+    cut_untried: np.ndarray | None = None
 
 
 def project_chart(V: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -611,10 +615,11 @@ def parameterize_charts(
     ) as helpers:
         # Small charts, all at once: already in mesh indices and units.
         bulk_rejected, bulk_bijective = np.zeros(n_src, dtype=bool), np.zeros(n_src, dtype=bool)
+        cut_untried = np.zeros(n_src, dtype=bool)  # cut before any solve (_caps)
         shares = _curvature_source(V, F, curvature, cfg)
         final = _bulk_charts(
             V, F, sub, order, bounds, cfg, size, bulk_rejected, bulk_bijective, helpers=helpers,
-            curvature=shares,
+            curvature=shares, capped=cut_untried,
         )  # fmt: skip
         if progress is not None and final:
             progress(len(final))
@@ -667,8 +672,9 @@ def parameterize_charts(
             )  # fmt: skip
 
         for src in rest:
-            pieces, first = results[src]
+            pieces, first, cut = results[src]
             final[src] = (_in_mesh(pieces, sources[src], sub.of(src)[0], size), first)
+            cut_untried[src] |= cut
         charts: list[Chart] = []
         first_pass = np.zeros(n_src, dtype=bool)
         for src in range(n_src):
@@ -677,7 +683,10 @@ def parameterize_charts(
         if cfg.min_split_gain is not None:
             charts = _split_for_gain(V, F, charts, cfg, seed, size, affinity, helpers)
         splits = np.bincount([c.source for c in charts], minlength=n_src) - 1
-        return ChartSet(charts=tuple(charts), splits=splits, first_pass_bijective=first_pass)
+        return ChartSet(
+            charts=tuple(charts), splits=splits, first_pass_bijective=first_pass,
+            cut_untried=cut_untried,
+        )  # fmt: skip
 
 
 def _excess(charts: list[Chart], area: np.ndarray, *, own: bool = False) -> np.ndarray:
@@ -1003,6 +1012,7 @@ def _bulk_charts(
     helpers: Helpers | None = None,
     project_only: np.ndarray | None = None,
     curvature: Callable[[], np.ndarray] | None = None,
+    capped: np.ndarray | None = None,
 ) -> dict[int, tuple[list[Chart], bool]]:
     """The small segmentation charts that map on their first try, mapped all at once.
 
@@ -1023,7 +1033,7 @@ def _bulk_charts(
     The charts ``project_only`` names (the split rounds' pieces past ``max_depth``) are taken as
     small ones, whatever their size, as :func:`_try_piece` takes them. With ``curvature`` (what
     gives each mesh face's :func:`segparam.mesh.curvature_shares`), the disks that are caps
-    (:func:`_caps`) are not solved but rejected.
+    (:func:`_caps`) are not solved but rejected, and ``capped[chart]`` is set (when given).
 
     A chart that fails any of these is not in the result: the per-chart path maps or splits it,
     as before. Where :func:`_try_piece` could only fail the same way (a small chart whose
@@ -1136,10 +1146,12 @@ def _bulk_charts(
         def share() -> np.ndarray:
             return np.bincount(lab, weights=curvature()[order], minlength=n_src)[cand]
 
-        capped = _caps(Vu, Fu, vert_chart, len(cand), share, nf[cand], cfg, go & one_loop)
-        go &= ~capped
+        cut = _caps(Vu, Fu, vert_chart, len(cand), share, nf[cand], cfg, go & one_loop)
+        go &= ~cut
         if rejected is not None:
-            rejected[cand[capped]] = True
+            rejected[cand[cut]] = True
+        if capped is not None:
+            capped[cand[cut]] = True
     holed = np.flatnonzero(go & (topo["loops"] >= 2))
     # Tubes are not solved as they are: one of two loops is cut open into a disk and solved with
     # the others (as _opened does alone), one of more loops is split.
@@ -1469,7 +1481,7 @@ def _solve_in_rounds(
     helpers: Helpers | None = None,
     give_up: Callable[[dict], set] | None = None,
     curvature: Callable[[], np.ndarray] | None = None,
-) -> dict[int, tuple[list[Chart], bool]]:
+) -> dict[int, tuple[list[Chart], bool, bool]]:
     """:func:`_solve_source` for every chart in `rest`, in one process, a split depth at a time.
 
     Each round tries every piece left: the small ones (at most ``BATCH_MAX_VERTICES`` vertices)
@@ -1494,6 +1506,7 @@ def _solve_in_rounds(
     first = dict.fromkeys(rest, False)
     # (chart, faces in chart-local indices, depth, path of bisection choices, bulk tried it)
     pending = [(src, np.arange(len(sources[src])), 0, (), bool(bulk_rejected[src])) for src in rest]
+    untried: set = set()  # the charts whose first piece (depth 0) was cut without a solve
     open_pieces = dict.fromkeys(rest, 1)
     dropped: set = set()
     while pending:
@@ -1530,6 +1543,8 @@ def _solve_in_rounds(
                 V, F, [sources[pending[k][0]][pending[k][1]] for k in solvable], curvature, cfg
             )
             rejected_at |= {k for k, c in zip(solvable, capped, strict=True) if c}
+            untried |= {pending[k][0] for k, c in zip(solvable, capped, strict=True)
+                        if c and pending[k][2] == 0}  # fmt: skip
             alone = [k for k in alone if k not in rejected_at]
         tasks = [(V[sub.of(src)[0]], sub.of(src)[1], faces, src, depth)
                  for src, faces, depth, *_ in (pending[k] for k in alone)]  # fmt: skip
@@ -1592,7 +1607,8 @@ def _solve_in_rounds(
             dropped |= give_up(so_far)
             nxt = [piece for piece in nxt if piece[0] not in dropped]
         pending = nxt
-    return {src: ([c for _, c in sorted(pieces[src], key=lambda t: t[0])], first[src])
+    return {src: ([c for _, c in sorted(pieces[src], key=lambda t: t[0])], first[src],
+                  src in untried)
             for src in rest if src not in dropped}  # fmt: skip
 
 
@@ -1604,18 +1620,19 @@ def _solve_source(
     cfg: SplitConfig,
     seed: int,
     shares: np.ndarray | None = None,
-) -> tuple[list[Chart], bool]:
+) -> tuple[list[Chart], bool, bool]:
     """Map one segmentation chart, bisecting the pieces that fail (the per-chart task).
 
     ``V, F`` are the chart's own vertices and faces; ``affinity()`` gives its face affinity
     (:meth:`_MeshAffinity.of_chart`; called only if the chart must be split). With ``shares``
     (its faces' :func:`segparam.mesh.curvature_shares` in the mesh), the caps (:func:`_caps`)
     are bisected without a solve, as :func:`_solve_in_rounds` does. Returns the bijective
-    pieces, in chart-local indices, and whether the first try succeeded.
+    pieces, in chart-local indices, whether the first try succeeded, and whether the chart was
+    cut without a try.
     """
     stack = [(np.arange(len(F)), 0)]
     pieces: list[Chart] = []
-    first = False
+    first = untried = False
     W = None
     while stack:
         faces, depth = stack.pop()
@@ -1627,7 +1644,7 @@ def _solve_source(
         )
         chart = None if capped else _try_piece(V, F, faces, src, depth, cfg, seed, status)
         if depth == 0:
-            first = _first_pass(chart, status)
+            first, untried = _first_pass(chart, status), capped
         elif chart is None:  # as _solve_in_rounds: a slit before another bisection
             chart = _slit_open(V, F, faces, src, depth, cfg, seed)
         if chart is not None:
@@ -1637,7 +1654,7 @@ def _solve_source(
             W = affinity()
         parts = divide(W, faces, seed=seed, straighten=_STRAIGHTEN)
         stack.extend((p, depth + 1) for p in reversed(parts) if len(p))
-    return pieces, first
+    return pieces, first, untried
 
 
 def _try_pieces(tasks: list[tuple], cfg: SplitConfig, seed: int, helpers: Helpers | None) -> list:

@@ -98,3 +98,23 @@ def test_save_stage_failing_keeps_the_previous_artifact(tmp_path, monkeypatch):
         save_stage(out, {"V": V + 1, "F": F}, {"stage": "remesh"})
     assert out.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json", "r.npz"]
+
+
+def test_a_chart_set_keeps_its_untried_charts_through_a_stage_file(tmp_path):
+    # The split stage's record of the charts it cut before any solve goes into the stage file
+    # and back; a file written before it was recorded reads as None (not recorded), not as 0.
+    import trimesh
+
+    from segparam.artifacts import charts_from_arrays, charts_to_arrays
+    from segparam.split import parameterize_charts
+
+    m = trimesh.creation.icosphere(2)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    labels = (V[F].mean(axis=1)[:, 2] > 0).astype(np.int64)  # two hemispheres: caps, cut at once
+    cs = parameterize_charts(V, F, labels)
+    assert cs.cut_untried.tolist() == [True, True]
+    out = save_stage(tmp_path / "p", {"V": V, "F": F, **charts_to_arrays(cs)}, {"stage": "x"})
+    back = charts_from_arrays(V, load_stage(out, needs=("V", "F")))
+    assert back.cut_untried.tolist() == [True, True]
+    old = {k: v for k, v in charts_to_arrays(cs).items() if k != "cut_untried"}
+    assert charts_from_arrays(V, old).cut_untried is None

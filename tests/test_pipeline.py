@@ -68,6 +68,9 @@ def check_atlas(atlas):
     assert a["l2_stretch"] == pytest.approx(d["l2_stretch"])
     per_chart_faces = sum(r["faces"] for r in report["charts"])
     assert per_chart_faces == len(F)
+    seg = report["segmentation"]  # charts cut before a solve were not bijective on a first try
+    assert seg["cut_untried"] == int(atlas.charts.cut_untried.sum())
+    assert seg["first_pass_bijective"] + seg["cut_untried"] <= seg["charts"]
     assert sum(r["area"] for r in report["charts"]) == pytest.approx(face_areas(V, F).sum())
     return report
 

@@ -616,6 +616,7 @@ def test_a_bump_too_stretched_to_map_is_cut_without_a_solve(monkeypatch, height,
     cs = parameterize_charts(V, F, labels, config=one)
     check_chart_set(V, F, cs)
     assert (len(F) not in solved) == cut and cs.first_pass_bijective[0] == (not cut)
+    assert cs.cut_untried.tolist() == [cut]
     if not cut:
         assert len(cs.charts) == 1
         return
@@ -650,11 +651,13 @@ def test_a_bumpy_cap_is_cut_without_a_solve_into_the_charts_a_solve_would_have_l
     cs = parameterize_charts(V, F, labels, config=one)
     check_chart_set(V, F, cs)
     assert solved and len(F) not in solved and not cs.first_pass_bijective[0]  # never tried
+    assert cs.cut_untried.tolist() == [True]
 
     solved.clear()
     monkeypatch.setattr(split, "CAP_NET", np.inf)  # solved first
     plain = parameterize_charts(V, F, labels, config=one)
     assert len(F) in solved and plain.first_pass_bijective[0]  # bijective, over the target
+    assert plain.cut_untried.tolist() == [False]
     assert len(plain.charts) == len(cs.charts) > 1
     for a, b in zip(plain.charts, cs.charts, strict=True):
         assert np.array_equal(a.faces, b.faces) and np.array_equal(a.uv, b.uv)
@@ -707,6 +710,7 @@ def test_worker_processes_cut_caps_without_a_solve_too(monkeypatch):
     serial = parameterize_charts(V, F, labels, config=SplitConfig(n_jobs=1))
     parallel = parameterize_charts(V, F, labels, config=SplitConfig(n_jobs=2))
     assert not parallel.first_pass_bijective.any()  # not tried: cut at once
+    assert serial.cut_untried.all() and parallel.cut_untried.all()  # and counted as such
     assert np.array_equal(serial.first_pass_bijective, parallel.first_pass_bijective)
     assert np.array_equal(serial.splits, parallel.splits)
     for a, b in zip(serial.charts, parallel.charts, strict=True):
