@@ -406,21 +406,39 @@ def cotan_weights(
     return E, np.bincount(h2e, weights=half, minlength=len(E))
 
 
-def cotan_laplacian(V: np.ndarray, F: np.ndarray, *, angles: np.ndarray | None = None):
+def cotan_laplacian(
+    V: np.ndarray,
+    F: np.ndarray,
+    *,
+    angles: np.ndarray | None = None,
+    edge_index: tuple | None = None,
+    keep: np.ndarray | None = None,
+):
     """The cotangent Laplacian, positive semi-definite: ``(L u)_i = sum_j w_ij (u_i - u_j)`` with
     the weights of :func:`cotan_weights`: the stiffness matrix of linear finite elements, so
-    positive semi-definite whatever the angles.
+    positive semi-definite whatever the angles. With ``keep`` (a vertex mask) only the rows and
+    columns of those vertices, in their order: the matrix of a Dirichlet problem whose other
+    vertices are held at 0 (each kept vertex's diagonal still sums all its edges). ``angles``
+    (:func:`corner_angles`) and ``edge_index`` (:func:`edges`) may be passed when the caller
+    has them.
 
     Returns
     -------
-    (n, n) scipy.sparse.csr_matrix
+    (k, k) scipy.sparse.csr_matrix
+        ``k`` the vertices kept (all by default).
     """
-    E, w = cotan_weights(V, F, angles=angles)
-    n = len(V)
-    degree = np.bincount(E.ravel(), weights=np.repeat(w, 2), minlength=n)
-    rows = np.concatenate([E[:, 0], E[:, 1], np.arange(n)])
-    cols = np.concatenate([E[:, 1], E[:, 0], np.arange(n)])
-    return sp.csr_matrix((np.concatenate([-w, -w, degree]), (rows, cols)), shape=(n, n))
+    E, w = cotan_weights(V, F, angles=angles, edge_index=edge_index)
+    degree = np.bincount(E.ravel(), weights=np.repeat(w, 2), minlength=len(V))
+    if keep is None:
+        keep = np.ones(len(V), dtype=bool)
+    at = np.cumsum(keep) - 1  # each kept vertex's row
+    both = keep[E[:, 0]] & keep[E[:, 1]]
+    i, j = at[E[both, 0]], at[E[both, 1]]
+    k = int(keep.sum())
+    rows = np.concatenate([i, j, np.arange(k)])
+    cols = np.concatenate([j, i, np.arange(k)])
+    return sp.csr_matrix((np.concatenate([-w[both], -w[both], degree[keep]]), (rows, cols)),
+                         shape=(k, k))  # fmt: skip
 
 
 def interior_defect(

@@ -73,7 +73,7 @@ from .mesh import (
     boundary_pieces,
     check_mesh,
     corner_angles,
-    cotan_weights,
+    cotan_laplacian,
     curvature_shares,
     cut_along,
     disk_labels,
@@ -82,6 +82,7 @@ from .mesh import (
     face_normals,
     group_by_label,
     inner_curvature,
+    interior_defect,
     is_disk,
     label_topology,
     mesh_arrays,
@@ -641,7 +642,7 @@ def parameterize_charts(
             """The curvature shares of chart ``src``'s faces (:func:`_solve_source`'s caps)."""
             return None if shares is None else shares()[sources[src]]
 
-        results: dict[int, tuple[list[Chart], bool]] = {}
+        results: dict[int, tuple[list[Chart], bool, bool]] = {}
         if parallel:
             from concurrent.futures import as_completed
 
@@ -1359,23 +1360,13 @@ def _conformal_stretch(
     Fw, fc = F[sel], face_chart[sel]
     angles = corner_angles(V, Fw)
     edge_index = edges(Fw)
-    E, w = cotan_weights(V, Fw, angles=angles, edge_index=edge_index)
+    K = interior_defect(V, Fw, angles=angles, edge_index=edge_index)[0]
     inner = np.bincount(Fw.ravel(), minlength=len(V)) > 0
     inner[boundary_edges(Fw, edge_index=edge_index).ravel()] = False
     u = np.zeros(len(V))
     if inner.any():
-        # the Laplacian's rows and columns of the inner vertices only (the rim's u is 0)
-        at = np.cumsum(inner) - 1
-        K = 2 * np.pi - np.bincount(Fw.ravel(), weights=angles.ravel(), minlength=len(V))
-        both = inner[E[:, 0]] & inner[E[:, 1]]
-        i, j = at[E[both, 0]], at[E[both, 1]]
-        diag = np.bincount(E.ravel(), weights=np.repeat(w, 2), minlength=len(V))[inner]
-        m = int(inner.sum())
-        L = sp.csc_matrix(
-            (np.concatenate([-w[both], -w[both], diag]),
-             (np.concatenate([i, j, np.arange(m)]), np.concatenate([j, i, np.arange(m)]))),
-            shape=(m, m),
-        )  # fmt: skip
+        # the rows and columns of the inner vertices only: the rim's u is 0
+        L = cotan_laplacian(V, Fw, angles=angles, edge_index=edge_index, keep=inner)
         try:
             u[inner] = spd_solver(L)(K[inner])
         except (ArithmeticError, RuntimeError, np.linalg.LinAlgError):  # singular: no bound
@@ -1893,22 +1884,16 @@ def _cut_solved(
 
 
 def _slit_ready(
-    V: np.ndarray, F: np.ndarray, faces: np.ndarray, depth: int, cfg: SplitConfig
+    V: np.ndarray, F: np.ndarray, faces: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """A piece that failed (``faces`` of the chart ``V, F``) cut along a slit
-    (:func:`segparam.mesh.slit_cut`), when it is deep enough (``SLIT_MIN_DEPTH``, up to
-    ``max_depth``), large enough for the stretch target and a disk holding
-    ``SLIT_MIN_CURVATURE`` radians or more inside, mostly of one sign (``SLIT_ONE_SIGN``):
-    ``(vertices, F_cut, copy_of)``, the piece's vertices in the chart and its faces on their
-    copies (the slit's vertices come twice: ``vertices[copy_of]``), else None."""
-    if not (SLIT_MIN_DEPTH <= depth <= cfg.max_depth and len(faces) >= STRETCH_MIN_FACES):
-        return None
+    """A candidate for a slit (:func:`_slit_candidates`; ``faces`` of the chart ``V, F``) cut
+    along one (:func:`segparam.mesh.slit_cut`) when it is a disk: ``(vertices, F_cut,
+    copy_of)``, the piece's vertices in the chart and its faces on their copies (the slit's
+    vertices come twice: ``vertices[copy_of]``), else None."""
     vertices, local_F = submesh(F, faces)
-    Vl = V[vertices]
-    net, absolute = inner_curvature(Vl, local_F, np.zeros(len(Vl), dtype=np.int64), 1)
-    if net[0] < max(SLIT_MIN_CURVATURE, SLIT_ONE_SIGN * absolute[0]) or not is_disk(local_F):
+    if not is_disk(local_F):
         return None
-    cut = slit_cut(Vl, local_F)
+    cut = slit_cut(V[vertices], local_F)
     if len(cut) == 0:
         return None
     F_cut, copy_of = cut_along(local_F, cut)
@@ -1916,12 +1901,14 @@ def _slit_ready(
 
 
 def _slit_candidates(pieces: list[tuple], cfg: SplitConfig) -> np.ndarray:
-    """Per ``(V, F, faces, src, depth)`` in ``pieces``, whether :func:`_slit_ready` may cut it:
-    its depth, size and inner curvature tests, for all pieces at once (the inner curvature of
-    each piece from one union of their charts: a chart's vertices outside the piece hold no
-    defect). The split rounds hand over tens of failed pieces a round (the 2k brains): one by
-    one, the test cost 0.1-0.3 ms a piece; at once, the cow and the 2k brains build 1-2% faster
-    (the same atlases)."""
+    """Per ``(V, F, faces, src, depth)`` in ``pieces`` (a failed piece, ``faces`` of the chart
+    ``V, F``), whether it may get a slit: deep enough (``SLIT_MIN_DEPTH``, up to
+    ``max_depth``), large enough for the stretch target, and holding ``SLIT_MIN_CURVATURE``
+    radians or more inside, mostly of one sign (``SLIT_ONE_SIGN``). For all pieces at once: the
+    inner curvature of each piece from one union of their charts (a chart's vertices outside
+    the piece hold no defect, so each sum is the piece's own, bit for bit). The split rounds
+    hand over tens of failed pieces a round (the 2k brains): one by one, the test cost 0.1-0.3
+    ms a piece; at once, the cow and the 2k brains build 1-2% faster (the same atlases)."""
     gate = np.array(
         [SLIT_MIN_DEPTH <= depth <= cfg.max_depth and len(faces) >= STRETCH_MIN_FACES
          for _, _, faces, _, depth in pieces], dtype=bool,
@@ -1936,9 +1923,7 @@ def _slit_candidates(pieces: list[tuple], cfg: SplitConfig) -> np.ndarray:
         [pieces[k][1][pieces[k][2]] + v_off[j] for j, k in enumerate(take)]
     )  # loop over the gated pieces: their faces in the union
     net, absolute = inner_curvature(V, F, np.repeat(np.arange(len(take)), n_v), len(take))
-    # _slit_ready tests each candidate exactly again; this only must not drop one it would take
-    slack = 1e-9
-    gate[take] = net >= np.maximum(SLIT_MIN_CURVATURE, SLIT_ONE_SIGN * absolute) - slack
+    gate[take] = net >= np.maximum(SLIT_MIN_CURVATURE, SLIT_ONE_SIGN * absolute)
     return gate
 
 
@@ -1946,9 +1931,12 @@ def _slit_open(
     V: np.ndarray, F: np.ndarray, faces: np.ndarray, src: int, depth: int, cfg: SplitConfig,
     seed: int,
 ) -> Chart | None:  # fmt: skip
-    """:func:`_slit_ready`'s piece solved alone: its chart if the map is kept, else None (the
-    caller bisects the piece)."""
-    ready = _slit_ready(V, F, faces, depth, cfg)
+    """A failed piece cut along a slit and solved alone, if it is a candidate
+    (:func:`_slit_candidates`, :func:`_slit_ready`): its chart if the map is kept, else None
+    (the caller bisects the piece)."""
+    if not _slit_candidates([(V, F, faces, src, depth)], cfg)[0]:
+        return None
+    ready = _slit_ready(V, F, faces)
     return None if ready is None else _slit_solved(V, ready, faces, src, depth, cfg, seed)
 
 
@@ -1975,7 +1963,7 @@ def _slit_charts(
     for k, (V, F, faces, src, depth) in enumerate(pieces):  # loop over the failed pieces
         if not maybe[k]:
             continue
-        ready = _slit_ready(V, F, faces, depth, cfg)
+        ready = _slit_ready(V, F, faces)
         if ready is None:
             continue
         _, _, copy_of = ready  # the piece's vertices, the slit's twice
