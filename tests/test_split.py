@@ -480,15 +480,20 @@ def _halves(subdivisions):
     return V, F, (V[F].mean(axis=1)[:, 2] > 0).astype(np.int64)
 
 
+def _cap_of(V, F, degrees):
+    """The faces of a unit sphere's mesh within ``degrees`` of its pole, on their own vertices."""
+    cap = F[V[F].mean(axis=1)[:, 2] > np.cos(np.radians(degrees))]
+    used, cap = np.unique(cap, return_inverse=True)
+    return V[used], cap.reshape(-1, 3)
+
+
 def _bumpy_cap(subdivisions, degrees):
     """The faces of an icosphere within ``degrees`` of its pole, every vertex moved radially by
     1% noise (seeded): a cap whose inner defects hold saddles and bumps beside their net sum."""
     m = trimesh.creation.icosphere(subdivisions)
-    V, F = np.asarray(m.vertices), np.asarray(m.faces)
-    F = F[V[F].mean(axis=1)[:, 2] > np.cos(np.radians(degrees))]
-    used, F = np.unique(F, return_inverse=True)
+    V, F = _cap_of(np.asarray(m.vertices), np.asarray(m.faces), degrees)
     rng = np.random.default_rng(0)
-    return V[used] * (1 + 0.01 * rng.standard_normal(len(used)))[:, None], F.reshape(-1, 3)
+    return V * (1 + 0.01 * rng.standard_normal(len(V)))[:, None], F
 
 
 def _recording_solves(monkeypatch, split):
@@ -545,13 +550,6 @@ def _polar_disk(rings):
     theta = np.concatenate([np.arange(6 * k) * 2 * np.pi / (6 * k) for k in range(1, rings + 1)])
     P = np.r_[[[0.0, 0.0]], np.c_[r * np.cos(theta), r * np.sin(theta)]]
     return np.c_[P, np.zeros(len(P))], Delaunay(P).simplices.astype(np.int64)
-
-
-def _cap_of(V, F, degrees):
-    """The faces of a unit sphere's mesh within ``degrees`` of its pole, on their own vertices."""
-    cap = F[V[F].mean(axis=1)[:, 2] > np.cos(np.radians(degrees))]
-    used, cap = np.unique(cap, return_inverse=True)
-    return V[used], cap.reshape(-1, 3)
 
 
 def test_conformal_stretch_is_that_of_the_stereographic_map_on_a_spherical_cap():
