@@ -38,8 +38,7 @@ def _raster_into(P, F, eps, mask):  # pragma: no cover - compiled
 
     Exact for closed sets, row by row: the part of a triangle inside the slab of texel row i
     (``i <= y <= i + 1``) is convex, so it touches the texels of that row that its x-range
-    meets; that x-range comes from the vertices inside the slab and the edges' crossings of the
-    slab's two lines. Degenerate triangles keep their segments.
+    meets (`_slab_span`). Degenerate triangles keep their segments.
     """
     rows, cols = mask.shape
     for t in range(F.shape[0]):
@@ -49,27 +48,7 @@ def _raster_into(P, F, eps, mask):  # pragma: no cover - compiled
         lo = max(int(np.floor(ymin - eps)), 0)
         hi = min(int(np.floor(ymax + eps)), rows - 1)
         for row in range(lo, hi + 1):
-            y0 = row - eps
-            y1 = row + 1 + eps
-            xmin = np.inf
-            xmax = -np.inf
-            for v in range(3):
-                iv = F[t, v]
-                iw = F[t, (v + 1) % 3]
-                xv, yv = P[iv, 0], P[iv, 1]
-                xw, yw = P[iw, 0], P[iw, 1]
-                if yv >= y0 and yv <= y1:
-                    xmin = min(xmin, xv)
-                    xmax = max(xmax, xv)
-                dy = yw - yv
-                if dy != 0:
-                    slope = (xw - xv) / dy
-                    ylow, yhigh = min(yv, yw), max(yv, yw)
-                    for line in (y0, y1):
-                        if line >= ylow and line <= yhigh:
-                            x = xv + (line - yv) * slope
-                            xmin = min(xmin, x)
-                            xmax = max(xmax, x)
+            xmin, xmax = _slab_span(P, a, b, c, row, eps)
             if xmin <= xmax:
                 x0 = max(int(np.floor(xmin - eps)), 0)
                 x1 = min(int(np.floor(xmax + eps)), cols - 1)
@@ -78,52 +57,185 @@ def _raster_into(P, F, eps, mask):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _fill_into(P, B, eps, mask):  # pragma: no cover - compiled
-    """OR the texels of the union of counter-clockwise triangles, from its outline B, into mask.
-
-    A texel touches the union when it touches a boundary edge, or else when its centre lies
-    inside, where the winding number of the outline is positive. Edges are rasterized as
-    degenerate triangles; winding numbers are summed along rows from the edges' crossings of
-    the texel-centre lines (`outline_winding`). The work is proportional to the outline plus
-    the box, not to the triangle count.
-    """
-    rows, cols = mask.shape
-    diff = outline_winding(P, B, eps, mask)
-    for row in range(rows):
-        w = 0
-        for col in range(cols):
-            w += diff[row, col]
-            if w > 0:
-                mask[row, col] = True
+def _slab_span(P, a, b, c, row, eps):  # pragma: no cover - compiled
+    """The x-range (xmin, xmax) of triangle ``P[[a, b, c]]`` inside the slab of texel row
+    `row` widened by `eps` (``row - eps <= y <= row + 1 + eps``), or (inf, -inf) when it misses
+    the slab: from the vertices inside the slab and the edges' crossings of its two lines."""
+    y0 = row - eps
+    y1 = row + 1 + eps
+    xmin = np.inf
+    xmax = -np.inf
+    for v in range(3):
+        iv = a if v == 0 else (b if v == 1 else c)
+        iw = b if v == 0 else (c if v == 1 else a)
+        xv, yv = P[iv, 0], P[iv, 1]
+        xw, yw = P[iw, 0], P[iw, 1]
+        if yv >= y0 and yv <= y1:
+            xmin = min(xmin, xv)
+            xmax = max(xmax, xv)
+        dy = yw - yv
+        if dy != 0:
+            slope = (xw - xv) / dy
+            ylow, yhigh = min(yv, yw), max(yv, yw)
+            for line in (y0, y1):
+                if line >= ylow and line <= yhigh:
+                    x = xv + (line - yv) * slope
+                    xmin = min(xmin, x)
+                    xmax = max(xmax, x)
+    return xmin, xmax
 
 
 @njit(cache=True, nogil=True)
-def outline_winding(P, B, eps, mask):  # pragma: no cover - compiled
-    """The first half of `_fill_into`: OR the texels the outline's edges touch into mask and
-    return the row-wise winding increments, ``diff[row, col]``: a texel's centre is inside
-    where the running sum of its row up to and including `col` is positive."""
+def _fill_into(P, B, eps, mask):  # pragma: no cover - compiled
+    """OR the texels of the union of counter-clockwise triangles, from its outline B, into mask
+    (the runs of `outline_runs`)."""
     rows, cols = mask.shape
-    E = np.empty((B.shape[0], 3), dtype=np.int64)
-    for e in range(B.shape[0]):
-        E[e, 0] = B[e, 0]
-        E[e, 1] = B[e, 1]
-        E[e, 2] = B[e, 1]
-    _raster_into(P, E, eps, mask)
-    diff = np.zeros((rows, cols + 1), dtype=np.int32)
-    for e in range(B.shape[0]):
-        xa, ya = P[B[e, 0], 0], P[B[e, 0], 1]
-        xb, yb = P[B[e, 1], 0], P[B[e, 1], 1]
-        # the edge crosses the centre lines y = i + 1/2 with min(ya, yb) <= y < max(ya, yb)
-        lo = max(int(np.ceil(min(ya, yb) - 0.5)), 0)
-        hi = min(int(np.ceil(max(ya, yb) - 0.5)) - 1, rows - 1)
-        # counter-clockwise: the outline goes down on the left side of the inside, up on the right
+    ptr, start, end = outline_runs(P, B, eps, rows, cols)
+    for row in range(rows):
+        for r in range(ptr[row], ptr[row + 1]):
+            mask[row, start[r] : end[r] + 1] = True
+
+
+@njit(cache=True, nogil=True)
+def outline_runs(P, B, eps, rows, cols):  # pragma: no cover - compiled
+    """The texels of the union of counter-clockwise triangles, from its outline's edges B (the
+    first two columns are read), as runs: row i holds ``[start[r], end[r]]`` (inclusive) for
+    r in ``ptr[i] .. ptr[i + 1] - 1``, sorted and disjoint, on a ``rows x cols`` grid.
+
+    A texel touches the union when it touches a boundary edge (an edge as a degenerate
+    triangle, `_slab_span`), or else when its centre lies inside, where the winding number of
+    the outline is positive (counter-clockwise: the outline goes down on the left side of the
+    inside, up on the right). Per row, the edges' x-ranges and their crossings of the row's
+    centre line are sorted and swept into runs, so the work is proportional to the outline,
+    not to the area: the packer fills every chart in every angle of every trial (on the bone
+    scan's 78 footprints, 6.9 million texels: 11.9 -> 4.5 ms with the packer's profiles).
+    """
+    ne = B.shape[0]
+    # one allocation for the bookkeeping (a trial fills thousands of small footprints): per
+    # edge the rows it touches (lo, hi) and those whose centre line it crosses; per row the
+    # touches' and crossings' counts, then offsets, and the runs' offsets
+    work = np.empty(4 * ne + 5 * rows + 3, dtype=np.int64)
+    span = work[: 4 * ne].reshape((ne, 4))
+    count = work[4 * ne : 4 * ne + 2 * rows + 2].reshape((2, rows + 1))
+    slot = work[4 * ne + 2 * rows + 2 : 4 * ne + 4 * rows + 2].reshape((2, rows))
+    ptr = work[4 * ne + 4 * rows + 2 :]
+    count[:] = 0
+    for e in range(ne):
+        ya, yb = P[B[e, 0], 1], P[B[e, 1], 1]
+        ymin, ymax = min(ya, yb), max(ya, yb)
+        span[e, 0] = max(int(np.floor(ymin - eps)), 0)
+        span[e, 1] = min(int(np.floor(ymax + eps)), rows - 1)
+        # the crossings of the centre lines y = i + 1/2 with min(ya, yb) <= y < max(ya, yb)
+        span[e, 2] = max(int(np.ceil(ymin - 0.5)), 0)
+        span[e, 3] = min(int(np.ceil(ymax - 0.5)) - 1, rows - 1)
+        for row in range(span[e, 0], span[e, 1] + 1):
+            count[0, row + 1] += 1
+        for row in range(span[e, 2], span[e, 3] + 1):
+            count[1, row + 1] += 1
+    for row in range(rows):
+        count[0, row + 1] += count[0, row]
+        count[1, row + 1] += count[1, row]
+    n_t, n_x = count[0, rows], count[1, rows]
+    # one buffer: touches (first, last texel), crossings (first centre right of it, winding
+    # step), the inside runs of one row, the runs found
+    buf = np.empty((2, 2 * n_t + 3 * n_x + rows), dtype=np.int64)
+    t_first, t_last = buf[0, :n_t], buf[1, :n_t]
+    x_col, x_step = buf[0, n_t : n_t + n_x], buf[1, n_t : n_t + n_x]
+    in_start, in_end = buf[0, n_t + n_x : n_t + 2 * n_x], buf[1, n_t + n_x : n_t + 2 * n_x]
+    start, end = buf[0, n_t + 2 * n_x :], buf[1, n_t + 2 * n_x :]
+    slot[0, :] = count[0, :rows]
+    slot[1, :] = count[1, :rows]
+    for e in range(ne):
+        ia, ib = B[e, 0], B[e, 1]
+        for row in range(span[e, 0], span[e, 1] + 1):
+            xmin, xmax = _slab_span(P, ia, ib, ib, row, eps)
+            q = slot[0, row]
+            t_first[q], t_last[q] = 1, 0  # empty, unless the edge meets the slab
+            if xmin <= xmax:
+                t_first[q] = max(int(np.floor(xmin - eps)), 0)
+                t_last[q] = min(int(np.floor(xmax + eps)), cols - 1)
+            slot[0, row] = q + 1
+        xa, ya = P[ia, 0], P[ia, 1]
+        xb, yb = P[ib, 0], P[ib, 1]
         step = 1 if yb < ya else -1
-        for row in range(lo, hi + 1):
-            t = (row + 0.5 - ya) / (yb - ya)
-            x = xa + t * (xb - xa)
-            first = min(max(int(np.ceil(x - 0.5)), 0), cols)  # first centre right of x
-            diff[row, first] += step
-    return diff
+        for row in range(span[e, 2], span[e, 3] + 1):
+            x = xa + (row + 0.5 - ya) / (yb - ya) * (xb - xa)
+            q = slot[1, row]
+            x_col[q] = min(max(int(np.ceil(x - 0.5)), 0), cols)
+            x_step[q] = step
+            slot[1, row] = q + 1
+    ptr[0] = 0
+    n = 0
+    for row in range(rows):
+        t0, t1 = count[0, row], count[0, row + 1]
+        x0, x1 = count[1, row], count[1, row + 1]
+        _sort_pairs(t_first, t_last, t0, t1)
+        _sort_pairs(x_col, x_step, x0, x1)
+        # the inside: texels j whose running winding (the steps at columns <= j) is positive
+        n_in = 0
+        w = 0
+        k = x0
+        while k < x1:
+            col = x_col[k]
+            while k < x1 and x_col[k] == col:
+                w += x_step[k]
+                k += 1
+            if col >= cols:
+                break
+            if w > 0:
+                last = min(x_col[k] - 1 if k < x1 else cols - 1, cols - 1)
+                if n_in > 0 and in_end[n_in - 1] + 1 >= col:
+                    in_end[n_in - 1] = max(in_end[n_in - 1], last)
+                else:
+                    in_start[n_in], in_end[n_in] = col, last
+                    n_in += 1
+        # the union of the touches (sorted by their first texel) and the inside runs
+        i, j = t0, 0
+        have = False
+        a0, b0 = 0, 0
+        while i < t1 or j < n_in:
+            if j >= n_in or (i < t1 and t_first[i] <= in_start[j]):
+                a, b = t_first[i], t_last[i]
+                i += 1
+            else:
+                a, b = in_start[j], in_end[j]
+                j += 1
+            if a > b:
+                continue
+            if have and a <= b0 + 1:
+                b0 = max(b0, b)
+                continue
+            if have:
+                start[n], end[n] = a0, b0
+                n += 1
+            a0, b0, have = a, b, True
+        if have:
+            start[n], end[n] = a0, b0
+            n += 1
+        ptr[row + 1] = n
+    return ptr, start[:n], end[:n]
+
+
+@njit(cache=True, nogil=True)
+def _sort_pairs(key, value, lo, hi):  # pragma: no cover - compiled
+    """Sort ``key[lo:hi]`` ascending in place, `value` along (Shell sort, Knuth's gaps: a row
+    holds a few entries, or hundreds where an outline runs along it; numba's sorts cost
+    seconds of the first run's compile)."""
+    n = hi - lo
+    gap = 1
+    while 3 * gap + 1 < n:
+        gap = 3 * gap + 1
+    while gap >= 1:
+        for i in range(lo + gap, hi):
+            k, v = key[i], value[i]
+            j = i
+            while j >= lo + gap and key[j - gap] > k:
+                key[j] = key[j - gap]
+                value[j] = value[j - gap]
+                j -= gap
+            key[j] = k
+            value[j] = v
+        gap //= 3
 
 
 def rasterize_triangles(P: np.ndarray, F: np.ndarray, shape: tuple[int, int], eps: float):

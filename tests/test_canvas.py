@@ -216,9 +216,9 @@ def _star(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_fill_in_the_profile_pass_matches_the_fill_then_the_profiles(seed: int) -> None:
-    # a trial fills a footprint inside its profile pass (_filled_profiles on the outline's
-    # winding increments); it must give _fill_into's texels and _profiles' numbers
+def test_profiles_from_runs_match_the_fill_then_the_profiles(seed: int) -> None:
+    # a trial fills a footprint from its outline's runs (_run_profiles of outline_runs); it
+    # must give _fill_into's texels and _profiles' numbers
     from segparam import raster
 
     rng = np.random.default_rng(seed)
@@ -232,11 +232,40 @@ def test_fill_in_the_profile_pass_matches_the_fill_then_the_profiles(seed: int) 
         rows, cols = (int(v) for v in np.floor(P.max(axis=0))[::-1] + 2)
         want = raster.fill_outline(P, B, (rows, cols), 1e-4)
         got = np.zeros((rows, cols), dtype=bool)
-        diff = raster.outline_winding(P, B, 1e-4, got)
-        profiles = canvas._filled_profiles(got, diff, rows, cols)
+        ptr, start, end = raster.outline_runs(P, B, 1e-4, rows, cols)
+        profiles = canvas._run_profiles(got, ptr, start, end, rows, cols)
         assert np.array_equal(got, want)
+        for i in range(rows):  # each row's runs: sorted, with a gap between any two
+            a, b = start[ptr[i] : ptr[i + 1]], end[ptr[i] : ptr[i + 1]]
+            assert (a <= b).all() and (a[1:] > b[:-1] + 1).all()
         for a, b in zip(profiles, canvas._profiles(want, rows, cols), strict=True):
             np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_edges_from_runs_are_the_leading_edges_of_every_turn(seed: int) -> None:
+    # the trial lists a large footprint's lower and left edges from its runs, for each quarter
+    # turn; they must be the cells _leading_edges finds on the turned mask (in any order)
+    from segparam import raster
+
+    rng = np.random.default_rng(seed)
+    for _ in range(5):
+        uv, F = _star(int(rng.integers(5, 40)), rng)
+        if rng.random() < 0.5:  # a notch: rows and columns of two runs
+            F = F[: max(len(F) - int(rng.integers(1, 4)), 1)]
+        B = raster.boundary_edges(F)
+        P = uv * rng.uniform(2, 30)
+        P = P - P.min(axis=0) + rng.uniform(0, 1, 2)
+        rows, cols = (int(v) for v in np.floor(P.max(axis=0))[::-1] + 2)
+        base = np.zeros((rows, cols), dtype=bool)
+        ptr, start, end = raster.outline_runs(P, B, 1e-4, rows, cols)
+        canvas._run_profiles(base, ptr, start, end, rows, cols)
+        for k in range(4):
+            mask = np.ascontiguousarray(np.rot90(base, -k))
+            want = canvas._leading_edges(mask, *mask.shape)
+            got = canvas._turned_edges(ptr, start, end, rows, cols, k)
+            for a, b in zip(got, want, strict=True):
+                assert sorted(map(tuple, a.tolist())) == sorted(map(tuple, b.tolist()))
 
 
 def test_hull_boxes_of_many_charts_match_one_chart_at_a_time_and_brute_force() -> None:
