@@ -636,6 +636,38 @@ def coarse_runs(mask, rows, cols, block):  # pragma: no cover - compiled
                 if mask[i, j]:
                     cm[R, C] = True
                     break
+    return _coarse_cell_runs(cm), cr, cc
+
+
+@njit(cache=True, nogil=True)
+def _turned_coarse_runs(ptr, start, end, rows, cols, k, block):  # pragma: no cover - compiled
+    """`coarse_runs` of ``np.rot90(base, -k)`` from the runs of `base` (rows x cols), without
+    turning it: each run marks the coarse cells its turned texels fall in (see `turned`)."""
+    r, c = (rows, cols) if k % 2 == 0 else (cols, rows)
+    cr = (r + block - 1) // block
+    cc = (c + block - 1) // block
+    cm = np.zeros((cr, cc), dtype=np.bool_)
+    for i in range(rows):
+        for q in range(ptr[i], ptr[i + 1]):
+            a, b = start[q], end[q]
+            if k == 0:  # turned row i, columns a .. b
+                cm[i // block, a // block : b // block + 1] = True
+            elif k == 2:  # row rows - 1 - i, columns cols - 1 - b .. cols - 1 - a
+                cm[
+                    (rows - 1 - i) // block, (cols - 1 - b) // block : (cols - 1 - a) // block + 1
+                ] = True
+            elif k == 1:  # column rows - 1 - i, rows a .. b
+                cm[a // block : b // block + 1, (rows - 1 - i) // block] = True
+            else:  # column i, rows cols - 1 - b .. cols - 1 - a
+                cm[(cols - 1 - b) // block : (cols - 1 - a) // block + 1, i // block] = True
+    return _coarse_cell_runs(cm), cr, cc
+
+
+@njit(cache=True, nogil=True)
+def _coarse_cell_runs(cm):  # pragma: no cover - compiled
+    """The runs of a coarse footprint's cells `cm`, as (row, first col, last col), widest
+    first (`coarse_runs`)."""
+    cr, cc = cm.shape
     runs = np.empty((cr * ((cc + 1) // 2), 3), dtype=np.int64)
     n = 0
     widest = 0
@@ -659,7 +691,7 @@ def coarse_runs(mask, rows, cols, block):  # pragma: no cover - compiled
     # entry: a row assignment ``runs[0] = runs[widest]`` took 2 s of the first run's compile)
     for k in range(3 if n else 0):
         runs[0, k], runs[widest, k] = runs[widest, k], runs[0, k]
-    return runs, cr, cc
+    return runs
 
 
 @njit(cache=True, nogil=True)
@@ -741,6 +773,15 @@ def holes(prefix, max_free, free_bits, runs, cr, cc, count):  # pragma: no cover
 
 # ----------------------------------------------------------------------------------------------
 # one trial
+
+
+@njit(cache=True, nogil=True)
+def _turn_into(masks, q, flat, base_off, base_shape, ident, o):  # pragma: no cover - compiled
+    """Write orientation o's footprint (its angle's base in `flat`, turned) into ``masks[q]``."""
+    a = ident[o, 0]
+    rows, cols = base_shape[a, 0], base_shape[a, 1]
+    base = flat[base_off[a] : base_off[a + 1]].reshape((rows, cols))
+    turned(base, rows, cols, ident[o, 1], masks[q])
 
 
 @njit(cache=True, nogil=True)
@@ -888,6 +929,7 @@ def trial(
         downs = [no_edge for _ in range(n_slots)]
         lefts = [no_edge for _ in range(n_slots)]
         has_edges = np.zeros(n_slots, dtype=np.bool_)
+        has_mask = np.zeros(n_slots, dtype=np.bool_)
         used = 0
         # starting points (orientation, row, col), in the order they are tried
         if rule == REST:
@@ -943,11 +985,18 @@ def trial(
             n_s = 0
             for o in range(n_kept):
                 a = ident[o, 0]
-                r0, c0 = base_shape[a, 0], base_shape[a, 1]
-                base = flat[base_off[a] : base_off[a + 1]].reshape((r0, c0))
-                turned(base, r0, c0, ident[o, 1], masks[o])
                 slot[o] = o
-                runs, cr, cc = coarse_runs(masks[o], shape[o, 0], shape[o, 1], block)
+                if fill[i] and shape[o, 0] * shape[o, 1] >= _RUN_EDGES_MIN_TEXELS:
+                    n1, n0 = base_shape[a, 0], base_shape[a, 1]
+                    p0, r0 = kept[a, 0], kept[a, 1]
+                    runs, cr, cc = _turned_coarse_runs(
+                        kept_ptr[p0 : p0 + n1 + 1], kept_start[r0:], kept_end[r0:], n1, n0,
+                        ident[o, 1], block,
+                    )  # fmt: skip
+                else:
+                    _turn_into(masks, o, flat, base_off, base_shape, ident, o)
+                    has_mask[o] = True
+                    runs, cr, cc = coarse_runs(masks[o], shape[o, 0], shape[o, 1], block)
                 got, rr, cols = holes(prefix, max_free, free_bits, runs, cr, cc, n_candidates)
                 for g in range(got):
                     s_or[n_s] = o
@@ -962,20 +1011,20 @@ def trial(
         zero = np.int64(0)  # the rows _before does not compare
         for g in range(n_s):
             o, row, col = s_or[g], s_row[g], s_col[g]
+            r, c = shape[o, 0], shape[o, 1]
+            from_runs = fill[i] and r * c >= _RUN_EDGES_MIN_TEXELS  # its runs were kept
             if slot[o] < 0:
-                a = ident[o, 0]
-                r0, c0 = base_shape[a, 0], base_shape[a, 1]
-                base = flat[base_off[a] : base_off[a + 1]].reshape((r0, c0))
-                turned(base, r0, c0, ident[o, 1], masks[used])
                 slot[o] = used
                 used += 1
+                if not from_runs:  # its edges come from its mask: turned now
+                    _turn_into(masks, slot[o], flat, base_off, base_shape, ident, o)
+                    has_mask[slot[o]] = True
             q = slot[o]
-            r, c = shape[o, 0], shape[o, 1]
             # every start fits by construction: a resting position clears the skyline in every
             # column, and a hole's coarse footprint meets no coarse cell holding a forbidden texel
             if not has_edges[q]:
                 a = ident[o, 0]
-                if fill[i] and r * c >= _RUN_EDGES_MIN_TEXELS:  # its runs were kept
+                if from_runs:
                     n1, n0 = base_shape[a, 0], base_shape[a, 1]
                     p0, r0 = kept[a, 0], kept[a, 1]
                     downs[q], lefts[q] = _turned_edges(
@@ -992,6 +1041,8 @@ def trial(
         if best_o < 0:
             return t, result, need
         r, c = shape[best_o, 0], shape[best_o, 1]
+        if not has_mask[slot[best_o]]:  # a large footprint's mask: turned for its placing only
+            _turn_into(masks, slot[best_o], flat, base_off, base_shape, ident, best_o)
         place(
             forbid,
             sky,

@@ -243,9 +243,10 @@ def test_profiles_from_runs_match_the_fill_then_the_profiles(seed: int) -> None:
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_edges_from_runs_are_the_leading_edges_of_every_turn(seed: int) -> None:
-    # the trial lists a large footprint's lower and left edges from its runs, for each quarter
-    # turn; they must be the cells _leading_edges finds on the turned mask (in any order)
+def test_edges_and_coarse_runs_from_runs_match_every_turned_mask(seed: int) -> None:
+    # the trial lists a large footprint's lower and left edges and its coarse runs from its
+    # runs, for each quarter turn; they must be the cells _leading_edges finds on the turned
+    # mask (in any order) and the runs coarse_runs finds there
     from segparam import raster
 
     rng = np.random.default_rng(seed)
@@ -266,6 +267,10 @@ def test_edges_from_runs_are_the_leading_edges_of_every_turn(seed: int) -> None:
             got = canvas._turned_edges(ptr, start, end, rows, cols, k)
             for a, b in zip(got, want, strict=True):
                 assert sorted(map(tuple, a.tolist())) == sorted(map(tuple, b.tolist()))
+            for block in (1, 3, 4):  # and its coarse footprint, for the "holes" rule
+                runs, cr, cc = canvas._turned_coarse_runs(ptr, start, end, rows, cols, k, block)
+                want_runs, wr, wc = canvas.coarse_runs(mask, *mask.shape, block)
+                assert (cr, cc) == (wr, wc) and np.array_equal(runs, want_runs)
 
 
 def test_hull_boxes_of_many_charts_match_one_chart_at_a_time_and_brute_force() -> None:
