@@ -1891,8 +1891,13 @@ def _slit_ready(
     copy_of)``, the piece's vertices in the chart and its faces on their copies (the slit's
     vertices come twice: ``vertices[copy_of]``), else None."""
     vertices, local_F = submesh(F, faces)
-    if not is_disk(local_F):
-        return None
+    return _slit_cut(V, vertices, local_F) if is_disk(local_F) else None
+
+
+def _slit_cut(
+    V: np.ndarray, vertices: np.ndarray, local_F: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """:func:`_slit_ready` of a disk given as its chart's ``vertices`` and its ``local_F``."""
     cut = slit_cut(V[vertices], local_F)
     if len(cut) == 0:
         return None
@@ -1959,11 +1964,21 @@ def _slit_charts(
     :func:`_bulk_charts` solves the tubes it cuts open), the others alone."""
     out: list[Chart | None] = [None] * len(pieces)
     batch = []
-    maybe = _slit_candidates(pieces, cfg)
-    for k, (V, F, faces, src, depth) in enumerate(pieces):  # loop over the failed pieces
-        if not maybe[k]:
+    cand = np.flatnonzero(_slit_candidates(pieces, cfg))
+    subs = [submesh(pieces[k][1], pieces[k][2]) for k in cand]  # loop over the candidates
+    # which are disks, all at once (is_disk one by one cost 0.75 ms a piece)
+    n_vert = np.array([len(vertices) for vertices, _ in subs], dtype=np.int64)
+    nf = np.array([len(local_F) for _, local_F in subs], dtype=np.int64)
+    union = [local_F + o for (_, local_F), o in zip(subs, np.cumsum(n_vert) - n_vert, strict=True)]
+    disks = disk_labels(
+        np.concatenate(union) if union else np.zeros((0, 3), dtype=np.int64),
+        np.repeat(np.arange(len(subs)), nf), len(subs),
+    )  # fmt: skip
+    for k, (vertices, local_F), disk in zip(cand.tolist(), subs, disks, strict=True):
+        if not disk:
             continue
-        ready = _slit_ready(V, F, faces)
+        V, F, faces, src, depth = pieces[k]
+        ready = _slit_cut(V, vertices, local_F)
         if ready is None:
             continue
         _, _, copy_of = ready  # the piece's vertices, the slit's twice
