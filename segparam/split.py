@@ -257,9 +257,18 @@ TUBE_TURNING = np.pi
 #: (1.3:1), the CAD plate's hole walls (3.8:1) and a pipe (3.1:1) open.
 TUBE_MAX_ASPECT = 6.0
 #: Meshes from this many faces up send whole charts to spawned workers; smaller ones are
-#: parameterized here, sharing their large batches with forked helpers (``_solve_batch``):
-#: starting a spawned worker costs about a second.
+#: parameterized here, sharing their large batches with forked helpers from
+#: ``HELPERS_MIN_FACES`` (``_solve_batch``): starting a spawned worker costs about a second.
 PARALLEL_MIN_FACES = 100_000
+#: Meshes from this many faces up (and under ``PARALLEL_MIN_FACES``) share their large solver
+#: batches with forked helpers; smaller ones are parameterized in this process alone. A fork
+#: costs 30-60 ms here (the fork, the helper's start, the copy-on-write faults that slow this
+#: process afterwards) and two processes each take about 70% of the whole's time, so helpers
+#: repay that only over a stage with enough work to share. Builds with helpers / without (min
+#: of 3, remeshing off, session 25): the cow (5.8k faces) 552 / 499 ms, the bunny with holes
+#: (10k) 613 / 585, the airplane (10.8k) 535 / 474, brain-like surfaces of 8k 690-700 /
+#: 690-712, 12k 858 / 908, 15k 932 / 989, brain-20k 1,008 / 1,079, fsaverage5 840 / 925.
+HELPERS_MIN_FACES = 12_000
 #: A chart is planar when no unit face normal differs from the first by more than this.
 PLANAR_TOL = 1e-9
 #: Charts of at most this many vertices that need the solver are solved together, as one
@@ -301,9 +310,10 @@ class SplitConfig:
         Pieces with fewer faces (>= 1) skip the solver and use the planar projection.
     n_jobs : int
         Processes that share the work (0: one per CPU, 1: this one alone): spawned workers for
-        meshes of at least ``PARALLEL_MIN_FACES`` faces, below that helpers forked for the
-        large solver batches (:func:`_solve_batch`, Linux). Charts are independent, so the
-        result does not depend on it.
+        meshes of at least ``PARALLEL_MIN_FACES`` faces, below that (from
+        ``HELPERS_MIN_FACES``) helpers forked for the large solver batches
+        (:func:`_solve_batch`, Linux). Charts are independent, so the result does not depend
+        on it.
     refine : {"slim", "arap", "none"}
         The refinement after the solver (see :func:`segparam.parameterize.parameterize_chart`):
         ``"none"`` keeps the paper's map.
@@ -609,10 +619,11 @@ def parameterize_charts(
     sub = _submeshes(F, labels, order, bounds)
     jobs = _jobs(cfg)
     affinity = _MeshAffinity(V, F, affinity)
-    # Below PARALLEL_MIN_FACES the large solver batches are shared with forked helpers; above,
-    # whole charts go to the spawned workers (which then have the cores).
+    # From HELPERS_MIN_FACES to PARALLEL_MIN_FACES the large solver batches are shared with
+    # forked helpers; above, whole charts go to the spawned workers (which then have the cores).
     with Helpers(
-        jobs if len(F) < PARALLEL_MIN_FACES else 1, prepare=_before_the_helpers
+        jobs if HELPERS_MIN_FACES <= len(F) < PARALLEL_MIN_FACES else 1,
+        prepare=_before_the_helpers,
     ) as helpers:
         # Small charts, all at once: already in mesh indices and units.
         bulk_rejected, bulk_bijective = np.zeros(n_src, dtype=bool), np.zeros(n_src, dtype=bool)

@@ -87,6 +87,7 @@ def test_charts_solved_in_parts_are_the_one_process_charts_bit_for_bit(monkeypat
     # no piece fits a batch: the pieces the solver takes one by one are dealt out instead.
     monkeypatch.setattr(split, "PART_MIN_FACES", 100)
     monkeypatch.setattr(split, "FORK_MIN_FACES", 0)
+    monkeypatch.setattr(split, "HELPERS_MIN_FACES", 0)
     if alone:
         monkeypatch.setattr(split, "BATCH_MAX_VERTICES", 10)
     shared_by = []
@@ -114,6 +115,30 @@ def test_charts_solved_in_parts_are_the_one_process_charts_bit_for_bit(monkeypat
     for a, b in zip(serial.charts, shared.charts, strict=True):
         assert np.array_equal(a.faces, b.faces) and np.array_equal(a.uv, b.uv)
         assert a.quality == b.quality and a.method == b.method
+
+
+@needs_fork
+def test_a_mesh_under_the_helpers_size_is_mapped_in_this_process_alone(monkeypatch):
+    # Below HELPERS_MIN_FACES no helper is forked, however large its batches are: a fork costs
+    # more than sharing a small mesh's work saves.
+    monkeypatch.setattr(split, "PART_MIN_FACES", 100)
+    monkeypatch.setattr(split, "FORK_MIN_FACES", 0)
+    shared_by = []
+    real_map = Helpers.map
+    monkeypatch.setattr(
+        Helpers,
+        "map",
+        lambda self, fn, args: shared_by.append(len(args)) or real_map(self, fn, args),
+    )
+    sphere = trimesh.creation.icosphere(3)
+    V, F = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    labels = segment(V, F, seed=0).labels
+    monkeypatch.setattr(split, "HELPERS_MIN_FACES", len(F) + 1)
+    parameterize_charts(V, F, labels, config=SplitConfig(n_jobs=2))
+    assert shared_by == []
+    monkeypatch.setattr(split, "HELPERS_MIN_FACES", len(F))
+    parameterize_charts(V, F, labels, config=SplitConfig(n_jobs=2))
+    assert 2 in shared_by
 
 
 def _dies_in_a_helper(x):
@@ -193,6 +218,7 @@ def test_a_multiprocessing_pool_worker_maps_its_charts_alone(monkeypatch):
 
     monkeypatch.setattr(split, "PART_MIN_FACES", 100)  # the forked worker sees these too
     monkeypatch.setattr(split, "FORK_MIN_FACES", 0)
+    monkeypatch.setattr(split, "HELPERS_MIN_FACES", 0)
     monkeypatch.setattr(split, "PARALLEL_MIN_FACES", 500)  # and the spawned workers' path
     with multiprocessing.get_context("fork").Pool(1) as pool:
         uvs, helper_jobs, worker_jobs = pool.apply(_split_in_a_pool_worker)
