@@ -370,83 +370,68 @@ def _turned_edges(ptr, start, end, rows, cols, k):  # pragma: no cover - compile
     and the runs' starts; k = 1 the starts and the cells open above; k = 2 the cells open
     above and the runs' ends; k = 3 the ends and the cells open below (see `turned`).
     """
-    kinds = ((_BELOW_OPEN, _RUN_STARTS), (_RUN_STARTS, _ABOVE_OPEN), (_ABOVE_OPEN, _RUN_ENDS),
-             (_RUN_ENDS, _BELOW_OPEN))[k]  # fmt: skip
+    # (no indexing of a tuple by k, nor slice assignments, in these kernels: numba compiles a
+    # switch, or a shape check with its message, for each; seconds on a first run)
+    if k == 0:
+        lower, left = _BELOW_OPEN, _RUN_STARTS
+    elif k == 1:
+        lower, left = _RUN_STARTS, _ABOVE_OPEN
+    elif k == 2:
+        lower, left = _ABOVE_OPEN, _RUN_ENDS
+    else:
+        lower, left = _RUN_ENDS, _BELOW_OPEN
     none = np.empty((0, 2), dtype=np.int64)  # the counting passes write nothing
     return (
-        _edge_cells(ptr, start, end, rows, cols, k, kinds[0], none),
-        _edge_cells(ptr, start, end, rows, cols, k, kinds[1], none),
+        _edge_cells(ptr, start, end, rows, cols, k, lower, none),
+        _edge_cells(ptr, start, end, rows, cols, k, left, none),
     )
 
 
 @njit(cache=True, nogil=True)
 def _edge_cells(ptr, start, end, rows, cols, k, kind, none):  # pragma: no cover - compiled
     """The base cells of one `kind` (see `_turned_edges`), as cells of the k-turned footprint:
-    counted (the runs' ends are one a run), then written."""
-    if kind == _RUN_STARTS or kind == _RUN_ENDS:
-        out = np.empty((ptr[rows], 2), dtype=np.int64)
-    else:
-        out = np.empty((_edge_pass(ptr, start, end, rows, cols, k, kind, none, False), 2),
-                       dtype=np.int64)  # fmt: skip
-    _edge_pass(ptr, start, end, rows, cols, k, kind, out, True)
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _edge_pass(ptr, start, end, rows, cols, k, kind, out, write):  # pragma: no cover - compiled
-    """`_edge_cells`' count (``write`` False) or its writing pass; returns the count."""
-    n = np.int64(0)
-    for i in range(rows):
-        if kind == _RUN_STARTS or kind == _RUN_ENDS:
-            for r in range(ptr[i], ptr[i + 1]):
-                if write:
-                    j = start[r] if kind == _RUN_STARTS else end[r]
-                    _turned_cell(out, n, i, j, rows, cols, k)
-                n += 1
-        else:
+    counted, then written (``rot90(base, -k)[I, J]`` with (I, J) = (i, j), (j, rows - 1 - i),
+    (rows - 1 - i, cols - 1 - j), (cols - 1 - j, i) for k = 0 .. 3). A row's cells open below
+    (above) are its runs' cells that row i - 1 (i + 1) does not cover, found by walking the
+    two rows' runs together. One function: each compiled function costs a first run time."""
+    out = none
+    n = 0
+    for write in (False, True):
+        if write:
+            out = np.empty((n, 2), dtype=np.int64)
+        n = 0
+        for i in range(rows):
             q = i - 1 if kind == _BELOW_OPEN else i + 1
-            n = _open_cells(ptr, start, end, i, q, rows, cols, k, out, n, write)
-    return n
-
-
-@njit(cache=True, nogil=True)
-def _open_cells(ptr, start, end, i, q, rows, cols, k, out, n, write):  # pragma: no cover
-    """The cells of row i of the runs that row q (none when outside the footprint) does not
-    cover: counted from n, or written into `out` from n as cells of the k-turned footprint;
-    returns the new count."""
-    inside = 0 <= q < rows
-    j1 = ptr[q + 1] if inside else 0
-    j = ptr[q] if inside else 0
-    for r in range(ptr[i], ptr[i + 1]):
-        x, b = start[r], end[r]
-        while j < j1 and end[j] < x:  # q's runs wholly left of this run
-            j += 1
-        g = j  # q's runs from here on: the next may cover x, a later one the rest
-        while x <= b:
-            if g < j1 and start[g] <= x:  # x is covered by run g of row q: skip past it
-                x = end[g] + 1
-                g += 1
-                continue
-            last = b if g >= j1 else min(b, start[g] - 1)
-            if write:
-                for c in range(x, last + 1):
-                    _turned_cell(out, n + c - x, i, c, rows, cols, k)
-            n += last - x + 1
-            x = last + 1
-    return n
-
-
-@njit(cache=True, nogil=True)
-def _turned_cell(out, n, i, j, rows, cols, k):  # pragma: no cover - compiled
-    """``out[n] =`` the cell of ``np.rot90(base, -k)`` that base cell (i, j) becomes."""
-    if k == 0:
-        out[n, 0], out[n, 1] = i, j
-    elif k == 1:
-        out[n, 0], out[n, 1] = j, rows - 1 - i
-    elif k == 2:
-        out[n, 0], out[n, 1] = rows - 1 - i, cols - 1 - j
-    else:
-        out[n, 0], out[n, 1] = cols - 1 - j, i
+            ends = kind == _RUN_STARTS or kind == _RUN_ENDS
+            g1 = ptr[q + 1] if not ends and 0 <= q < rows else 0
+            g0 = ptr[q] if not ends and 0 <= q < rows else 0
+            for r in range(ptr[i], ptr[i + 1]):
+                a, b = start[r], end[r]
+                if ends:  # one cell a run
+                    a = b = start[r] if kind == _RUN_STARTS else end[r]
+                while g0 < g1 and end[g0] < a:  # q's runs wholly left of this run
+                    g0 += 1
+                g = g0  # q's runs from here on: the next may cover a, a later one the rest
+                while a <= b:
+                    if g < g1 and start[g] <= a:  # a is covered by run g of row q: skip it
+                        a = end[g] + 1
+                        g += 1
+                        continue
+                    last = b if g >= g1 else min(b, start[g] - 1)
+                    if write:
+                        for j in range(a, last + 1):
+                            m = n + j - a
+                            if k == 0:
+                                out[m, 0], out[m, 1] = i, j
+                            elif k == 1:
+                                out[m, 0], out[m, 1] = j, rows - 1 - i
+                            elif k == 2:
+                                out[m, 0], out[m, 1] = rows - 1 - i, cols - 1 - j
+                            else:
+                                out[m, 0], out[m, 1] = cols - 1 - j, i
+                    n += last - a + 1
+                    a = last + 1
+    return out
 
 
 @njit(cache=True, nogil=True)
@@ -651,6 +636,32 @@ def _turned_coarse_runs(ptr, start, end, rows, cols, k, block):  # pragma: no co
         for q in range(ptr[i], ptr[i + 1]):
             a, b = start[q], end[q]
             if k == 0:  # turned row i, columns a .. b
+                for C in range(a // block, b // block + 1):
+                    cm[i // block, C] = True
+            elif k == 2:  # row rows - 1 - i, columns cols - 1 - b .. cols - 1 - a
+                for C in range((cols - 1 - b) // block, (cols - 1 - a) // block + 1):
+                    cm[(rows - 1 - i) // block, C] = True
+            elif k == 1:  # column rows - 1 - i, rows a .. b
+                for R in range(a // block, b // block + 1):
+                    cm[R, (rows - 1 - i) // block] = True
+            else:  # column i, rows cols - 1 - b .. cols - 1 - a
+                for R in range((cols - 1 - b) // block, (cols - 1 - a) // block + 1):
+                    cm[R, i // block] = True
+    return _coarse_cell_runs(cm), cr, cc
+
+
+@njit(cache=True, nogil=True)
+def _turned_coarse_runs(ptr, start, end, rows, cols, k, block):  # pragma: no cover - compiled
+    """`coarse_runs` of ``np.rot90(base, -k)`` from the runs of `base` (rows x cols), without
+    turning it: each run marks the coarse cells its turned texels fall in (see `turned`)."""
+    r, c = (rows, cols) if k % 2 == 0 else (cols, rows)
+    cr = (r + block - 1) // block
+    cc = (c + block - 1) // block
+    cm = np.zeros((cr, cc), dtype=np.bool_)
+    for i in range(rows):
+        for q in range(ptr[i], ptr[i + 1]):
+            a, b = start[q], end[q]
+            if k == 0:  # turned row i, columns a .. b
                 cm[i // block, a // block : b // block + 1] = True
             elif k == 2:  # row rows - 1 - i, columns cols - 1 - b .. cols - 1 - a
                 cm[
@@ -791,9 +802,11 @@ def _append(buf, n, values):  # pragma: no cover - compiled
     end = n + len(values)
     if end > len(buf):
         grown = np.empty(max(2 * len(buf), end), dtype=buf.dtype)
-        grown[:n] = buf[:n]
+        for k in range(n):  # loops, not slice copies: see _turned_edges
+            grown[k] = buf[k]
         buf = grown
-    buf[n:end] = values
+    for k in range(len(values)):
+        buf[n + k] = values[k]
     return buf, end
 
 

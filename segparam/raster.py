@@ -93,7 +93,8 @@ def _fill_into(P, B, eps, mask):  # pragma: no cover - compiled
     ptr, start, end = outline_runs(P, B, eps, rows, cols)
     for row in range(rows):
         for r in range(ptr[row], ptr[row + 1]):
-            mask[row, start[r] : end[r] + 1] = True
+            for col in range(start[r], end[r] + 1):
+                mask[row, col] = True
 
 
 @njit(cache=True, nogil=True)
@@ -111,64 +112,66 @@ def outline_runs(P, B, eps, rows, cols):  # pragma: no cover - compiled
     scan's 78 footprints, 6.9 million texels: 11.9 -> 4.5 ms with the packer's profiles).
     """
     ne = B.shape[0]
-    # one allocation for the bookkeeping (a trial fills thousands of small footprints): per
-    # edge the rows it touches (lo, hi) and those whose centre line it crosses; per row the
-    # touches' and crossings' counts, then offsets, and the runs' offsets
-    work = np.empty(4 * ne + 5 * rows + 3, dtype=np.int64)
-    span = work[: 4 * ne].reshape((ne, 4))
-    count = work[4 * ne : 4 * ne + 2 * rows + 2].reshape((2, rows + 1))
-    slot = work[4 * ne + 2 * rows + 2 : 4 * ne + 4 * rows + 2].reshape((2, rows))
-    ptr = work[4 * ne + 4 * rows + 2 :]
-    count[:] = 0
+    # per edge the rows it touches (lo, hi) and those whose centre line it crosses; per row
+    # the touches' and crossings' counts, then offsets (no slice assignment in this module's
+    # kernels: numba compiles a shape check with its message for each, seconds on a first run)
+    lo_t = np.empty(ne, dtype=np.int64)
+    hi_t = np.empty(ne, dtype=np.int64)
+    lo_x = np.empty(ne, dtype=np.int64)
+    hi_x = np.empty(ne, dtype=np.int64)
+    c_t = np.zeros(rows + 1, dtype=np.int64)
+    c_x = np.zeros(rows + 1, dtype=np.int64)
     for e in range(ne):
         ya, yb = P[B[e, 0], 1], P[B[e, 1], 1]
         ymin, ymax = min(ya, yb), max(ya, yb)
-        span[e, 0] = max(int(np.floor(ymin - eps)), 0)
-        span[e, 1] = min(int(np.floor(ymax + eps)), rows - 1)
+        lo_t[e] = max(int(np.floor(ymin - eps)), 0)
+        hi_t[e] = min(int(np.floor(ymax + eps)), rows - 1)
         # the crossings of the centre lines y = i + 1/2 with min(ya, yb) <= y < max(ya, yb)
-        span[e, 2] = max(int(np.ceil(ymin - 0.5)), 0)
-        span[e, 3] = min(int(np.ceil(ymax - 0.5)) - 1, rows - 1)
-        for row in range(span[e, 0], span[e, 1] + 1):
-            count[0, row + 1] += 1
-        for row in range(span[e, 2], span[e, 3] + 1):
-            count[1, row + 1] += 1
+        lo_x[e] = max(int(np.ceil(ymin - 0.5)), 0)
+        hi_x[e] = min(int(np.ceil(ymax - 0.5)) - 1, rows - 1)
+        for row in range(lo_t[e], hi_t[e] + 1):
+            c_t[row + 1] += 1
+        for row in range(lo_x[e], hi_x[e] + 1):
+            c_x[row + 1] += 1
     for row in range(rows):
-        count[0, row + 1] += count[0, row]
-        count[1, row + 1] += count[1, row]
-    n_t, n_x = count[0, rows], count[1, rows]
-    # one buffer: touches (first, last texel), crossings (first centre right of it, winding
-    # step), the inside runs of one row, the runs found
-    buf = np.empty((2, 2 * n_t + 3 * n_x + rows), dtype=np.int64)
-    t_first, t_last = buf[0, :n_t], buf[1, :n_t]
-    x_col, x_step = buf[0, n_t : n_t + n_x], buf[1, n_t : n_t + n_x]
-    in_start, in_end = buf[0, n_t + n_x : n_t + 2 * n_x], buf[1, n_t + n_x : n_t + 2 * n_x]
-    start, end = buf[0, n_t + 2 * n_x :], buf[1, n_t + 2 * n_x :]
-    slot[0, :] = count[0, :rows]
-    slot[1, :] = count[1, :rows]
+        c_t[row + 1] += c_t[row]
+        c_x[row + 1] += c_x[row]
+    n_t, n_x = c_t[rows], c_x[rows]
+    # touches (first, last texel), crossings (first centre right of it, winding step), the
+    # inside runs of one row, the runs found
+    t_first, t_last = np.empty(n_t, dtype=np.int64), np.empty(n_t, dtype=np.int64)
+    x_col, x_step = np.empty(n_x, dtype=np.int64), np.empty(n_x, dtype=np.int64)
+    in_start, in_end = np.empty(n_x, dtype=np.int64), np.empty(n_x, dtype=np.int64)
+    start, end = np.empty(n_t + n_x, dtype=np.int64), np.empty(n_t + n_x, dtype=np.int64)
+    s_t = np.empty(rows, dtype=np.int64)
+    s_x = np.empty(rows, dtype=np.int64)
+    for row in range(rows):
+        s_t[row] = c_t[row]
+        s_x[row] = c_x[row]
     for e in range(ne):
         ia, ib = B[e, 0], B[e, 1]
-        for row in range(span[e, 0], span[e, 1] + 1):
+        for row in range(lo_t[e], hi_t[e] + 1):
             xmin, xmax = _slab_span(P, ia, ib, ib, row, eps)
-            q = slot[0, row]
+            q = s_t[row]
             t_first[q], t_last[q] = 1, 0  # empty, unless the edge meets the slab
             if xmin <= xmax:
                 t_first[q] = max(int(np.floor(xmin - eps)), 0)
                 t_last[q] = min(int(np.floor(xmax + eps)), cols - 1)
-            slot[0, row] = q + 1
+            s_t[row] = q + 1
         xa, ya = P[ia, 0], P[ia, 1]
         xb, yb = P[ib, 0], P[ib, 1]
         step = 1 if yb < ya else -1
-        for row in range(span[e, 2], span[e, 3] + 1):
+        for row in range(lo_x[e], hi_x[e] + 1):
             x = xa + (row + 0.5 - ya) / (yb - ya) * (xb - xa)
-            q = slot[1, row]
+            q = s_x[row]
             x_col[q] = min(max(int(np.ceil(x - 0.5)), 0), cols)
             x_step[q] = step
-            slot[1, row] = q + 1
-    ptr[0] = 0
+            s_x[row] = q + 1
+    ptr = np.zeros(rows + 1, dtype=np.int64)
     n = 0
     for row in range(rows):
-        t0, t1 = count[0, row], count[0, row + 1]
-        x0, x1 = count[1, row], count[1, row + 1]
+        t0, t1 = c_t[row], c_t[row + 1]
+        x0, x1 = c_x[row], c_x[row + 1]
         _sort_pairs(t_first, t_last, t0, t1)
         _sort_pairs(x_col, x_step, x0, x1)
         # the inside: texels j whose running winding (the steps at columns <= j) is positive
