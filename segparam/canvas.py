@@ -651,30 +651,6 @@ def _turned_coarse_runs(ptr, start, end, rows, cols, k, block):  # pragma: no co
 
 
 @njit(cache=True, nogil=True)
-def _turned_coarse_runs(ptr, start, end, rows, cols, k, block):  # pragma: no cover - compiled
-    """`coarse_runs` of ``np.rot90(base, -k)`` from the runs of `base` (rows x cols), without
-    turning it: each run marks the coarse cells its turned texels fall in (see `turned`)."""
-    r, c = (rows, cols) if k % 2 == 0 else (cols, rows)
-    cr = (r + block - 1) // block
-    cc = (c + block - 1) // block
-    cm = np.zeros((cr, cc), dtype=np.bool_)
-    for i in range(rows):
-        for q in range(ptr[i], ptr[i + 1]):
-            a, b = start[q], end[q]
-            if k == 0:  # turned row i, columns a .. b
-                cm[i // block, a // block : b // block + 1] = True
-            elif k == 2:  # row rows - 1 - i, columns cols - 1 - b .. cols - 1 - a
-                cm[
-                    (rows - 1 - i) // block, (cols - 1 - b) // block : (cols - 1 - a) // block + 1
-                ] = True
-            elif k == 1:  # column rows - 1 - i, rows a .. b
-                cm[a // block : b // block + 1, (rows - 1 - i) // block] = True
-            else:  # column i, rows cols - 1 - b .. cols - 1 - a
-                cm[(cols - 1 - b) // block : (cols - 1 - a) // block + 1, i // block] = True
-    return _coarse_cell_runs(cm), cr, cc
-
-
-@njit(cache=True, nogil=True)
 def _coarse_cell_runs(cm):  # pragma: no cover - compiled
     """The runs of a coarse footprint's cells `cm`, as (row, first col, last col), widest
     first (`coarse_runs`)."""
