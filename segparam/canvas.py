@@ -353,9 +353,9 @@ def _leading_edges(mask, rows, cols):  # pragma: no cover - compiled
 #: A filled footprint of at least this many texels keeps its runs, and the trial reads off them
 #: its turns' slide edges (`_turned_edges`) and coarse footprints (`_turned_coarse_runs`),
 #: turning its mask only to place it; a smaller one's come from its turned mask
-#: (`_leading_edges`, `coarse_runs`), which is faster below about 64 x 64 texels. Per
-#: footprint (a disk, both edge lists): 48 x 48 texels 2.9 against 2.6 us, 64 x 64 3.8 against
-#: 4.3, 96 x 96 5.5 against 9.0.
+#: (`_leading_edges`, `coarse_runs`). The edges from the mask are faster below about 64 x 64
+#: texels (per footprint, a disk, both lists: 48 x 48 texels 2.9 against 2.6 us, 64 x 64 3.8
+#: against 4.3, 96 x 96 5.5 against 9.0); the coarse footprints take the same threshold.
 _RUN_EDGES_MIN_TEXELS = 4096
 #: The base footprint's cells that `_turned_edges` lists: a run's cells whose neighbour below
 #: (`_BELOW_OPEN`) or above (`_ABOVE_OPEN`) is empty, the runs' first and last cells.
