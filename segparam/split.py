@@ -213,8 +213,13 @@ GAIN_MIN_SHARE = 0.7
 #: above 154 faces was kept on any mesh of ``bench_atlas.py --quick`` (the wavy scan's 66 charts
 #: of 247-1079 faces removed 1-16% of their excess, the icosphere's and the torus's 5,000-face
 #: quarters 60% and 32%), and trying them cost the stage 1.9 s of CPU on the wavy scan (1.4 ->
-#: 3.3 s) and 0.5-0.8 s on the icosphere and the torus.
-GAIN_MAX_FACES = 256
+#: 3.3 s) and 0.5-0.8 s on the icosphere and the torus. 256 until session 25: of the 541
+#: charts tried on 37 meshes (the quick set, realistic brains of 2k-8k faces at six seeds, the
+#: bunny, the range scan, turned parts, data/brain.obj), the 65 bisections kept were of 5-49
+#: faces and one of 148 (brain-20k); the 74 charts of more than 160 faces were all kept whole,
+#: and trying them cost the cow 488 -> 415 ms a build, the bunny with holes 595 -> 556, the
+#: bone 215 -> 203, data/brain.obj 1,104 -> 1,065 (the same atlases on the 37 meshes).
+GAIN_MAX_FACES = 160
 #: ... and the least excess of its own (``(L2^2 - 1) + (angle - 1)`` of the chart alone) a chart
 #: needs to be tried: a chart this close to an isometry is left whole however large its share
 #: of a small mesh (a 4-face strip folded down its middle, refined to L2 1.0000 / angle 1.0017,

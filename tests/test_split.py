@@ -258,6 +258,28 @@ def test_a_chart_distorted_at_one_spot_is_bisected_for_the_gain():
     assert _atlas_excess(V, F, cs) <= _atlas_excess(V, F, plain) - MIN_SPLIT_GAIN * added
 
 
+def test_a_chart_above_the_size_bound_is_not_tried_for_the_gain(monkeypatch):
+    # GAIN_MAX_FACES bounds the pass's cost: the cone of the test above is cut into pieces for
+    # the targets, and the gain pass bisects some of them; with the bound one face under the
+    # smallest it bisected, none of those is bisected (the others are as before).
+    import segparam.split as split
+
+    V, F = tri_grid(10, 10)
+    V = np.c_[V[:, :2], np.zeros(len(V))]
+    V[np.argmin(((V[:, :2] - 0.5) ** 2).sum(axis=1)), 2] = 0.2
+    labels = np.zeros(len(F), dtype=np.int64)
+    plain = parameterize_charts(V, F, labels, config=SplitConfig(min_split_gain=None))
+    kept = {tuple(sorted(c.faces)) for c in parameterize_charts(V, F, labels).charts}
+    bisected = [c for c in plain.charts if tuple(sorted(c.faces)) not in kept]
+    assert bisected
+    smallest = min(len(c.faces) for c in bisected)
+    monkeypatch.setattr(split, "GAIN_MAX_FACES", smallest - 1)
+    bound = {tuple(sorted(c.faces)) for c in parameterize_charts(V, F, labels).charts}
+    for c in plain.charts:
+        if len(c.faces) >= smallest:
+            assert tuple(sorted(c.faces)) in bound  # left whole
+
+
 def test_a_chart_curved_all_over_is_not_bisected_for_the_gain(monkeypatch):
     # A spherical cap: a bisection leaves most of its distortion in both halves, so it stays
     # whole, though a bisection would lower the atlas's distortion by more than the gain asked.
@@ -266,6 +288,7 @@ def test_a_chart_curved_all_over_is_not_bisected_for_the_gain(monkeypatch):
     import segparam.split as split
 
     V, F = spherical_cap(10, 10, extent=2.2)
+    monkeypatch.setattr(split, "GAIN_MAX_FACES", len(F))  # tried: the share rule keeps it whole
     labels = np.zeros(len(F), dtype=np.int64)
     cs = parameterize_charts(V, F, labels)
     assert len(cs.charts) == 1
