@@ -419,9 +419,9 @@ def test_a_tube_too_long_to_open_is_split(monkeypatch, batched):
 @pytest.mark.slow
 def test_the_gain_pass_drops_a_bisection_between_rounds_once_it_fails_anyway(monkeypatch):
     """After each round a bisection is judged again, with its pieces mapped so far and the ones
-    still to map (each adds excess and a chart): on the quick start's brain the pass drops one
-    that way (its 125-face chart was being halved down to 8-face pieces, one round each), and
-    the atlas is the one mapping every piece gives."""
+    still to map (each adds excess and a chart): on the quick start's brain, with charts of up
+    to 256 faces tried, the pass drops one that way (a chart was being halved down to 8-face
+    pieces, one round each), and the atlas is the one mapping every piece gives."""
     import segparam.split as split
     from segparam.cli import DEFAULT_MESH_NAME, _data
     from segparam.io import load_mesh
@@ -429,6 +429,8 @@ def test_the_gain_pass_drops_a_bisection_between_rounds_once_it_fails_anyway(mon
 
     V, F = load_mesh(_data(DEFAULT_MESH_NAME))
     cfg = PipelineConfig().replace(remesh={"mode": "off"})
+    # the bisection dropped is of a chart above today's size bound (tried up to session 25)
+    monkeypatch.setattr(split, "GAIN_MAX_FACES", 256)
     dropped = []
     real = split._hopeless
 
