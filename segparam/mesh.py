@@ -39,6 +39,7 @@ __all__ = [
     "group_by_label",
     "inner_curvature",
     "interior_defect",
+    "interior_vertices",
     "is_disk",
     "is_edge_manifold",
     "is_vertex_manifold",
@@ -441,17 +442,28 @@ def cotan_laplacian(
                          shape=(k, k))  # fmt: skip
 
 
+def interior_vertices(
+    F: np.ndarray, n_vertices: int, *, edge_index: tuple | None = None
+) -> np.ndarray:
+    """(n_vertices,) bool: the vertices some face uses and no boundary edge touches.
+    ``edge_index`` is ``edges(F)`` when the caller has it."""
+    interior = np.bincount(F.ravel(), minlength=n_vertices) > 0
+    interior[boundary_edges(F, edge_index=edge_index).ravel()] = False
+    return interior
+
+
 def interior_defect(
     V: np.ndarray,
     F: np.ndarray,
     *,
     angles: np.ndarray | None = None,
     edge_index: tuple | None = None,
+    interior: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The angle defect ``2 pi - sum of angles`` at every interior vertex (0 on the boundary and
     at unused vertices: a boundary's turning is not curvature), and every vertex's angle sum.
-    ``angles`` (:func:`corner_angles`) and ``edge_index`` (:func:`edges`) may be passed when the
-    caller has them.
+    ``angles`` (:func:`corner_angles`), ``edge_index`` (:func:`edges`) and ``interior``
+    (:func:`interior_vertices`) may be passed when the caller has them.
 
     Returns
     -------
@@ -460,8 +472,8 @@ def interior_defect(
     if angles is None:
         angles = corner_angles(V, F)
     total = np.bincount(F.ravel(), weights=angles.ravel(), minlength=len(V))
-    interior = np.bincount(F.ravel(), minlength=len(V)) > 0
-    interior[boundary_edges(F, edge_index=edge_index).ravel()] = False
+    if interior is None:
+        interior = interior_vertices(F, len(V), edge_index=edge_index)
     return np.where(interior, 2 * np.pi - total, 0.0), total
 
 

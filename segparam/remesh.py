@@ -60,6 +60,7 @@ from .mesh import (
     face_adjacency,
     face_areas,
     face_normals,
+    interior_vertices,
     is_edge_manifold,
     is_vertex_manifold,
     mesh_arrays,
@@ -244,8 +245,7 @@ def _quality(V: np.ndarray, F: np.ndarray) -> MeshQuality:
     E = edge_index[0]
     length = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
     valence = np.bincount(E.ravel(), minlength=len(V))
-    interior = valence > 0
-    interior[boundary_edges(F, edge_index=edge_index).ravel()] = False
+    interior = interior_vertices(F, len(V), edge_index=edge_index)
     val = valence[interior]
     mean = float(length.mean())
     return MeshQuality(

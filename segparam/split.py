@@ -83,6 +83,7 @@ from .mesh import (
     group_by_label,
     inner_curvature,
     interior_defect,
+    interior_vertices,
     is_disk,
     label_topology,
     mesh_arrays,
@@ -1376,9 +1377,8 @@ def _conformal_stretch(
     Fw, fc = F[sel], face_chart[sel]
     angles = corner_angles(V, Fw)
     edge_index = edges(Fw)
-    K = interior_defect(V, Fw, angles=angles, edge_index=edge_index)[0]
-    inner = np.bincount(Fw.ravel(), minlength=len(V)) > 0
-    inner[boundary_edges(Fw, edge_index=edge_index).ravel()] = False
+    inner = interior_vertices(Fw, len(V), edge_index=edge_index)
+    K = interior_defect(V, Fw, angles=angles, edge_index=edge_index, interior=inner)[0]
     u = np.zeros(len(V))
     if inner.any():
         # the rows and columns of the inner vertices only: the rim's u is 0

@@ -498,3 +498,19 @@ def test_cotan_laplacian_is_symmetric_semidefinite_and_exact_on_linear_functions
     # the corner at vertex 0 is a right angle: edge 1-2 gets 0; at vertex 1, cot = 2, edge 0-2
     assert L1[1, 2] == pytest.approx(0.0, abs=1e-12)
     assert L1[0, 2] == pytest.approx(-0.5 * 2.0) and L1[0, 1] == pytest.approx(-0.5 * 0.5)
+
+
+def test_interior_vertices_are_the_used_ones_off_the_boundary():
+    # a grid with one unused vertex appended: its rim and the unused vertex are not interior,
+    # and the interior defect is zero exactly off that mask
+    V, F = tri_grid(5, 4)
+    V = np.vstack([np.c_[V[:, :2], 0.1 * np.sin(V[:, 0] * 3)], [[9.0, 9.0, 9.0]]])
+    inner = mesh.interior_vertices(F, len(V))
+    rim = np.unique(mesh.boundary_edges(F))
+    used = np.zeros(len(V), dtype=bool)
+    used[F.ravel()] = True
+    assert np.array_equal(inner, used & ~np.isin(np.arange(len(V)), rim))
+    assert inner.sum() == len(V) - 1 - len(rim) > 0
+    defect, _ = mesh.interior_defect(V, F)
+    assert np.array_equal(defect, mesh.interior_defect(V, F, interior=inner)[0])
+    assert (defect[~inner] == 0).all()
