@@ -399,13 +399,13 @@ def _edge_cells(ptr, start, end, rows, cols, k, kind, none):  # pragma: no cover
     two rows' runs together. One function: each compiled function costs a first run time."""
     out = none
     n = 0
+    ends = kind == _RUN_STARTS or kind == _RUN_ENDS
     for write in (False, True):
         if write:
             out = np.empty((n, 2), dtype=np.int64)
         n = 0
         for i in range(rows):
             q = i - 1 if kind == _BELOW_OPEN else i + 1
-            ends = kind == _RUN_STARTS or kind == _RUN_ENDS
             g1 = ptr[q + 1] if not ends and 0 <= q < rows else 0
             g0 = ptr[q] if not ends and 0 <= q < rows else 0
             for r in range(ptr[i], ptr[i + 1]):

@@ -1982,12 +1982,11 @@ def _slit_charts(
     batch = []
     cand = np.flatnonzero(_slit_candidates(pieces, cfg))
     subs = [submesh(pieces[k][1], pieces[k][2]) for k in cand]  # loop over the candidates
-    # which are disks, all at once (is_disk one by one cost 0.75 ms a piece)
-    n_vert = np.array([len(vertices) for vertices, _ in subs], dtype=np.int64)
+    # which are disks, all at once (is_disk one by one cost 0.75 ms a piece; disk_labels gives
+    # each label its own vertices, so the pieces' local faces need no offsets)
     nf = np.array([len(local_F) for _, local_F in subs], dtype=np.int64)
-    union = [local_F + o for (_, local_F), o in zip(subs, np.cumsum(n_vert) - n_vert, strict=True)]
     disks = disk_labels(
-        np.concatenate(union) if union else np.zeros((0, 3), dtype=np.int64),
+        np.concatenate([local_F for _, local_F in subs]) if subs else np.zeros((0, 3), np.int64),
         np.repeat(np.arange(len(subs)), nf), len(subs),
     )  # fmt: skip
     for k, (vertices, local_F), disk in zip(cand.tolist(), subs, disks, strict=True):
