@@ -22,6 +22,7 @@ __all__ = [
     "boundary_edges",
     "boundary_loops",
     "check_mesh",
+    "cone_slits",
     "connected_components",
     "corner_angles",
     "curvature_shares",
@@ -906,6 +907,59 @@ def slit_cut(V: np.ndarray, F: np.ndarray) -> np.ndarray:
         _edge_graph(V, F), indices=rim, min_only=True, return_predecessors=True
     )
     return _path_back(pred, int(np.argmax(np.where(np.isfinite(dist), dist, -1.0))))
+
+
+def cone_slits(
+    V: np.ndarray,
+    F: np.ndarray,
+    vert_chart: np.ndarray,
+    n_charts: int,
+    *,
+    min_defect: float = 1e-9,
+) -> tuple[list[np.ndarray], np.ndarray]:
+    """Per chart of a disjoint union (``vert_chart``: each vertex's chart, ascending), the
+    shortest path of edges (3-D length) from its strongest cone, the inner vertex of largest
+    absolute angle defect, to its nearest boundary vertex: the slit that frees that cone
+    (:func:`cut_along`; :func:`segparam.split._slit_cones`). On a boundary vertex the defect is
+    taken up by the boundary's turning, so no map needs to spread it as distortion.
+
+    One defect pass and one multi-source Dijkstra search (from every boundary vertex of every
+    chart at once) for the whole union: the charts share no vertex, so every path stays in its
+    chart. A chart whose strongest cone holds no more than ``min_defect`` (default: rounding)
+    gets no slit, and the search does not enter it.
+
+    Returns
+    -------
+    slits : list of (c, 2) int64 ndarrays
+        Per chart, the path's edges as vertex pairs of the union; empty for a chart without a
+        boundary or an inner vertex with a defect.
+    defect : (n_charts,) float64 ndarray
+        Per chart, its slit's cone's absolute defect (radians; 0 without a slit).
+    """
+    from scipy.sparse.csgraph import dijkstra
+
+    out = [np.zeros((0, 2), dtype=np.int64) for _ in range(n_charts)]
+    cone = np.zeros(n_charts)
+    strength = np.abs(interior_defect(V, F)[0])
+    # each chart's strongest cone: the vertices by chart, then by strength (the first of ties)
+    order = np.lexsort((np.arange(len(V)), -strength, vert_chart))
+    first = np.searchsorted(vert_chart[order], np.arange(n_charts))
+    has = first < len(V)
+    has[has] = vert_chart[order[first[has]]] == np.flatnonzero(has)
+    cones = order[first[has]]
+    keep = strength[cones] > min_defect
+    chosen, cones = np.flatnonzero(has)[keep], cones[keep]
+    wanted = np.zeros(n_charts, dtype=bool)
+    wanted[chosen] = True
+    Fw = F[wanted[vert_chart[F[:, 0]]]]  # the search stays in the charts it starts from
+    rim = np.unique(boundary_edges(Fw))
+    if len(rim) == 0:
+        return out, cone
+    _, pred, _ = dijkstra(_edge_graph(V, Fw), indices=rim, min_only=True, return_predecessors=True)
+    for c, v in zip(chosen.tolist(), cones.tolist(), strict=True):
+        out[c] = _path_back(pred, v)  # loop over the charts: a path of a few edges each
+        cone[c] = strength[v] if len(out[c]) else 0.0
+    return out, cone
 
 
 def _edge_graph(V: np.ndarray, F: np.ndarray) -> sp.csr_matrix:

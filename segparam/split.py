@@ -35,7 +35,10 @@ apex does, and the piece often maps as one chart where a bisection made two (the
 Once every chart meets the targets, a small chart whose distortion sits at one spot (a cone of a
 coarse scan) is bisected again when that removes most of it (:func:`_split_for_gain`,
 ``min_split_gain``): on the realistic 2k-face brain of ``benchmarks/bench_atlas.py`` 98 -> 111
-charts and angle distortion 1.0845 -> 1.0714 (at the other defaults).
+charts and angle distortion 1.0845 -> 1.0714 (at the other defaults). Last, a small chart
+still above ``slit_above`` in angle distortion whose strongest cone sits by its rim is cut along
+the slit from that cone to the rim and solved again (:func:`_slit_cones`): the boundary's
+turning takes up the cone's defect, and no chart is added.
 
 Small charts are mapped in bulk, not one Python round trip each (:func:`_bulk_charts`): every
 chart that is projected on its first try (fewer than ``min_faces`` faces, or planar) is
@@ -72,6 +75,7 @@ from .mesh import (
     boundary_edges,
     boundary_pieces,
     check_mesh,
+    cone_slits,
     corner_angles,
     cotan_laplacian,
     curvature_shares,
@@ -227,6 +231,19 @@ GAIN_MAX_FACES = 160
 #: was cut in two). The bisections kept on the 2k brain were of charts of 0.11-0.25, brain-20k's
 #: one of 0.11.
 GAIN_MIN_EXCESS = 0.02
+#: Default ``SplitConfig.slit_above``: the angle distortion above which a finished chart's
+#: strongest cone is freed by a slit (:func:`_slit_cones`) ...
+SLIT_ABOVE = 1.06
+#: ... kept when the slit chart's own excess is at most ``1 - CONE_SLIT_GAIN`` of the chart's ...
+CONE_SLIT_GAIN = 0.2
+#: ... a chart taking up to this many slits, one per round.
+CONE_SLIT_ROUNDS = 3
+CONE_SLIT_MAX_FACES = 64
+CONE_SLIT_MAX_EDGES = 2
+CONE_MIN_DEFECT = 0.4
+CONE_SLIT_MIN_GAIN = 1e-4
+_MOST = 0.5
+_WARM = True
 #: A piece of at least ``STRAIGHTEN_MIN_FACES`` faces that is bisected gets the border between
 #: its halves straightened by ``STRAIGHTEN_PASSES`` passes of the segmentation's majority
 #: filter (as its own borders, ``SegmentConfig.smoothing``): the Fiedler vector's median cuts
@@ -327,6 +344,11 @@ class SplitConfig:
         ``refine="slim"``: weight (finite, >= 0) of the conformal term in the refined energy;
         higher trades L2 stretch for less angle distortion (:func:`segparam.refine.slim_refine`;
         charts under ``SMALL_CHART_ANGLE_FACES`` faces get ``SMALL_CHART_ANGLE_SCALE`` times it).
+    slit_above : float or None
+        Last: a solver's chart whose angle distortion is above this (finite, >= 1) is cut along a
+        slit from its strongest cone to its rim and solved again, kept when that removes most
+        of its distortion (:func:`_slit_cones`; no chart is added, the slit becomes a seam;
+        None: no such slits).
 
     Raises
     ------
@@ -345,6 +367,7 @@ class SplitConfig:
     n_jobs: int = 0
     refine: str = "slim"
     angle_weight: float = ANGLE_WEIGHT
+    slit_above: float | None = SLIT_ABOVE
 
     def __post_init__(self) -> None:
         # Every field, type first (bool is not a number here); numbers are stored as plain
@@ -364,6 +387,7 @@ class SplitConfig:
             "n_jobs": check_int("n_jobs", self.n_jobs, low=0),
             "refine": check_choice("refine", self.refine, REFINES),
             "angle_weight": check_number("angle_weight", self.angle_weight, low=0),
+            "slit_above": check_number("slit_above", self.slit_above, low=1, optional=True),
         }
         for name, value in checked.items():
             object.__setattr__(self, name, value)
@@ -700,6 +724,7 @@ def parameterize_charts(
             charts.extend(pieces)
         if cfg.min_split_gain is not None:
             charts = _split_for_gain(V, F, charts, cfg, seed, size, affinity, helpers)
+        charts = _slit_cones(V, F, charts, cfg, size, helpers)
         splits = np.bincount([c.source for c in charts], minlength=n_src) - 1
         return ChartSet(
             charts=tuple(charts), splits=splits, first_pass_bijective=first_pass,
@@ -780,6 +805,84 @@ def _split_for_gain(
                 done[i] = True
         tried = np.repeat(done, [len(c) for c in now])
         charts = [c for chart in now for c in chart]
+
+
+def _slit_cones(
+    V: np.ndarray,
+    F: np.ndarray,
+    charts: list[Chart],
+    cfg: SplitConfig,
+    size: float,
+    helpers: Helpers | None,
+) -> list[Chart]:
+    """Free the strongest cone of every chart whose angle distortion is above ``slit_above``,
+    round by round (at most ``CONE_SLIT_ROUNDS``): the chart is cut along the slit from that cone
+    to its rim (:func:`segparam.mesh.cone_slits`) and solved again, all such charts in one batch
+    (:func:`_solve_batch`); the slit chart replaces the chart when its map is kept (bijective,
+    within the targets) and its own distortion excess (``L2^2 - 1`` plus angle ``- 1``) is at
+    most ``1 - CONE_SLIT_GAIN`` of the chart's. A chart keeps its faces and its place: no chart
+    is added, the slit's edges become seams. The solver's charts only (planar and developable
+    ones are exact), disks of ``STRETCH_MIN_FACES`` to ``BATCH_MAX_VERTICES``. ``V`` is in the
+    stage's unit frame, the charts in mesh indices and units."""
+    if cfg.slit_above is None:
+        return charts
+    charts = list(charts)
+    area = face_areas(V, F)
+    tried = np.zeros(len(charts), dtype=bool)
+    for _ in range(CONE_SLIT_ROUNDS):
+        nf = np.array([len(c.faces) for c in charts])
+        cand = np.flatnonzero(~tried & (nf >= STRETCH_MIN_FACES) & (nf <= CONE_SLIT_MAX_FACES))
+        solved = [i for i in cand.tolist() if charts[i].method == "hessian"]
+        cand = np.array(
+            [i for i in solved if charts[i].quality.angle_distortion > cfg.slit_above], np.int64
+        )
+        if len(cand):  # the others cannot gain enough, whatever their slit
+            cand = cand[_excess([charts[i] for i in cand], area) >= CONE_SLIT_MIN_GAIN / _MOST]
+        if len(cand) == 0:
+            break
+        tried[cand] = True
+        nv = np.array([len(c.vertices) for c in charts])
+        # the candidates as one union of their own vertices (copies of a seam's vertices apart)
+        Vu = np.concatenate([V[charts[i].vertices] for i in cand])
+        vstart = np.r_[0, np.cumsum(nv[cand])[:-1]]
+        Fu = np.concatenate([charts[i].local_F + vstart[j] for j, i in enumerate(cand)])
+        vert_chart = np.repeat(np.arange(len(cand)), nv[cand])
+        disks = disk_labels(Fu, vert_chart[Fu[:, 0]], len(cand))
+        slits, _ = cone_slits(Vu, Fu, vert_chart, len(cand), min_defect=CONE_MIN_DEFECT)
+        cut = []  # (candidate, its faces on their copies, each copy's vertex in the chart)
+        for j, i in enumerate(cand.tolist()):  # loop over the candidates: one cut each
+            if disks[j] and 0 < len(slits[j]) <= CONE_SLIT_MAX_EDGES:
+                F_cut, copy_of = cut_along(charts[i].local_F, slits[j] - vstart[j])
+                cut.append((i, F_cut, copy_of))
+        if not cut:
+            break
+        n_cut = np.array([len(copy_of) for _, _, copy_of in cut])
+        cstart = np.r_[0, np.cumsum(n_cut)[:-1]]
+        n_faces = np.array([len(F_cut) for _, F_cut, _ in cut])
+        maps = _solve_batch(
+            np.concatenate([V[charts[i].vertices[copy_of]] for i, _, copy_of in cut]),
+            np.concatenate([F_cut + cstart[j] for j, (_, F_cut, _) in enumerate(cut)]),
+            np.repeat(np.arange(len(cut)), n_cut), _stretch_limit(n_faces, cfg), cfg, helpers,
+        )  # fmt: skip
+        q = maps.quality
+        kept = q["bijective"] & _within_targets(
+            q["angle_distortion"], q["l2_stretch"], n_faces, cfg
+        )
+        before = _excess([charts[i] for i, _, _ in cut], np.empty(0), own=True)
+        after = (q["l2_stretch"] ** 2 - 1) + (q["angle_distortion"] - 1)
+        kept &= after <= (1 - CONE_SLIT_GAIN) * before
+        share = np.array([area[charts[i].faces].sum() for i, _, _ in cut]) / area.sum()
+        kept &= share * (before - after) >= CONE_SLIT_MIN_GAIN
+        records = quality_records(q)
+        for j, (i, F_cut, copy_of) in enumerate(cut):  # loop over the slit charts
+            if kept[j]:
+                c = charts[i]
+                uv = maps.uv[cstart[j] : cstart[j] + n_cut[j]] * size
+                charts[i] = dataclasses.replace(
+                    c, vertices=c.vertices[copy_of], local_F=F_cut, uv=uv, quality=records[j]
+                )
+                tried[i] = False  # it may take another slit next round
+    return charts
 
 
 def _hopeless(

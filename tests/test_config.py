@@ -69,6 +69,7 @@ BAD = {
     ("split", "n_jobs"): ([True, "2", 1.0], [-1]),
     ("split", "refine"): ([1, True], ["SLIM", "lbfgs"]),
     ("split", "angle_weight"): (["16", True], [-1, math.inf, math.nan]),
+    ("split", "slit_above"): (["1.06", True], [0.5, 0, math.inf, math.nan]),
     ("pack", "resolution"): ([1024.0, True, "1024"], [0, -1, 16385]),
     ("pack", "padding"): ([2.0, True, "2"], [-1]),
     ("pack", "method"): ([1, True], ["skyline", "Raster"]),

@@ -514,3 +514,38 @@ def test_interior_vertices_are_the_used_ones_off_the_boundary():
     defect, _ = mesh.interior_defect(V, F)
     assert np.array_equal(defect, mesh.interior_defect(V, F, interior=inner)[0])
     assert (defect[~inner] == 0).all()
+
+
+def test_cone_slits_free_each_charts_strongest_cone_by_the_shortest_way_out():
+    # Two charts in one union: a flat grid with one vertex raised (a cone) and a flat grid
+    # (none). The first's slit runs from its apex, the strongest cone, to its nearest rim
+    # vertex, as far as a brute-force search says; the flat one gets none.
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import dijkstra
+
+    V, F = tri_grid(7, 6)
+    V = np.c_[V[:, :2], np.zeros(len(V))]
+    apex = int(np.argmin(((V[:, :2] - [0.45, 0.4]) ** 2).sum(axis=1)))
+    V[apex, 2] = 0.1
+    V[apex - 1, 2] = 0.02  # a weaker cone beside it
+    n = len(V)
+    Vu, Fu = np.r_[V, V * [1, 1, 0]], np.r_[F, F + n]
+    vert_chart = np.repeat([0, 1], n)
+    slits, defect = mesh.cone_slits(Vu, Fu, vert_chart, 2)
+    strength = np.abs(mesh.interior_defect(V, F)[0])
+    assert int(np.argmax(strength)) == apex and defect[0] == strength[apex] and defect[1] == 0
+    assert slits[1].shape == (0, 2)
+    cut = slits[0]
+    E = mesh.edges(F)[0]
+    assert {tuple(e) for e in np.sort(cut, axis=1).tolist()} <= {tuple(e) for e in E.tolist()}
+    ends = np.flatnonzero(np.bincount(cut.ravel(), minlength=n) == 1)
+    rim = np.unique(mesh.boundary_edges(F))
+    assert apex in ends and np.isin(np.setdiff1d(ends, [apex]), rim).all()
+    w = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+    G = sp.coo_matrix((np.r_[w, w], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])))
+    to_rim = dijkstra(G.tocsr(), indices=rim, min_only=True)
+    length = np.linalg.norm(V[cut[:, 0]] - V[cut[:, 1]], axis=1).sum()
+    assert length == pytest.approx(to_rim[apex])
+    # a bound above the apex's defect: no slit at all
+    slits, defect = mesh.cone_slits(Vu, Fu, vert_chart, 2, min_defect=strength[apex] + 1e-9)
+    assert all(len(s) == 0 for s in slits) and not defect.any()

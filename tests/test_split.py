@@ -858,3 +858,94 @@ def test_a_knob_whose_halves_fail_gets_a_slit_instead_of_a_second_bisection(monk
     for a, b in zip(cs.charts, parallel.charts, strict=True):
         assert np.array_equal(a.faces, b.faces) and np.array_equal(a.vertices, b.vertices)
         assert np.allclose(a.uv, b.uv, atol=1e-6)
+
+
+def _cone_by_the_rim(height=0.15):
+    """A flat 6 x 6 grid (50 faces) with the vertex one row in from the middle of its lower
+    side raised: a cone of 1.4 rad one edge from the rim. Returns V, F and the apex."""
+    V, F = tri_grid(6, 6)
+    V = np.c_[V[:, :2], np.zeros(len(V))]
+    apex = int(np.argmin(((V[:, :2] - [0.5, 0.2]) ** 2).sum(axis=1)))
+    V[apex, 2] = height
+    return V, F, apex
+
+
+def test_a_cone_by_the_rim_is_freed_by_a_slit_not_a_new_chart():
+    # The chart meets the targets with its cone inside; cut along the one edge from the apex to
+    # the rim, the apex is on the boundary, whose turning takes up its defect: the same one
+    # chart, with most of its distortion gone.
+    import segparam.split as split
+
+    V, F, apex = _cone_by_the_rim()
+    labels = np.zeros(len(F), dtype=np.int64)
+    plain = parameterize_charts(
+        V, F, labels, config=SplitConfig(min_split_gain=None, slit_above=None)
+    )
+    cs = parameterize_charts(V, F, labels, config=SplitConfig(min_split_gain=None))
+    check_chart_set(V, F, cs)
+    (p,), (c,) = plain.charts, cs.charts
+    assert p.quality.angle_distortion > split.SLIT_ABOVE
+    assert len(c.vertices) == len(np.unique(c.vertices)) + 1  # the slit's rim vertex, twice
+    assert apex in c.vertices[np.unique(boundary_edges(c.local_F))]
+    own = split._excess([p, c], np.empty(0), own=True)
+    assert own[1] <= (1 - split.CONE_SLIT_GAIN) * own[0]
+    assert c.quality.angle_distortion < p.quality.angle_distortion
+    assert c.quality.l2_stretch < p.quality.l2_stretch
+
+
+@pytest.mark.parametrize(
+    "gate, value",
+    [
+        ("CONE_MIN_DEFECT", 1.5),  # the cone (1.44 rad) is too weak to be worth a seam
+        ("CONE_SLIT_MAX_FACES", 49),  # the chart (50 faces) is too large to be tried
+        ("CONE_SLIT_MAX_EDGES", 0),  # the slit (one edge) is too long
+        ("CONE_SLIT_MIN_GAIN", 1.0),  # no slit can lower the atlas's excess that much
+        ("CONE_SLIT_GAIN", 0.99),  # the slit removes less than that of the chart's excess
+    ],
+)
+def test_a_cone_slit_is_tried_and_kept_only_within_its_bounds(monkeypatch, gate, value):
+    import segparam.split as split
+
+    V, F, _ = _cone_by_the_rim()
+    labels = np.zeros(len(F), dtype=np.int64)
+    cfg = SplitConfig(min_split_gain=None)
+    assert len(parameterize_charts(V, F, labels, config=cfg).charts[0].vertices) == 37
+    monkeypatch.setattr(split, gate, value)
+    (c,) = parameterize_charts(V, F, labels, config=cfg).charts
+    assert len(c.vertices) == len(np.unique(c.vertices)) == 36  # no slit
+
+
+def test_slits_free_the_cones_of_a_coarse_brain_without_adding_charts():
+    # The realistic 2k-face brain of bench_atlas.py (seed 1): its small charts hold cones of
+    # 0.5-1.7 rad; slits bring its angle distortion and L2 stretch down, the charts the same.
+    from segparam.mesh import face_areas
+    from segparam.quality import distortion, signed_areas
+    from segparam.synthetic import brain_like_surface
+
+    V, F = brain_like_surface(2000, seed=1)
+    seg = segment(V, F)
+    plain = parameterize_charts(V, F, seg.labels, config=SplitConfig(slit_above=None))
+    cs = parameterize_charts(V, F, seg.labels)
+    check_chart_set(V, F, cs)
+    assert len(cs.charts) == len(plain.charts)
+    slit = sum(len(c.vertices) > len(np.unique(c.vertices)) for c in cs.charts)
+    assert slit >= 10
+
+    def figures(charts):
+        """The atlas's L2 stretch and angle distortion, every chart at its 3-D area (as the
+        packer scales them)."""
+        A = face_areas(V, F)
+        uv, faces, offset = [], [], 0
+        for c in charts:  # loop over the charts
+            uv.append(
+                c.uv * np.sqrt(A[c.faces].sum() / np.abs(signed_areas(c.uv, c.local_F)).sum())
+            )
+            faces.append(c.local_F + offset)
+            offset += len(c.uv)
+        V3 = np.concatenate([V[c.vertices] for c in charts])
+        d = distortion(V3, np.concatenate(faces), np.concatenate(uv))
+        return d["l2_stretch"], d["angle_distortion"]
+
+    l2_plain, angle_plain = figures(plain.charts)
+    l2, angle = figures(cs.charts)
+    assert angle < angle_plain - 0.01 and l2 < l2_plain
