@@ -231,18 +231,34 @@ GAIN_MAX_FACES = 160
 #: was cut in two). The bisections kept on the 2k brain were of charts of 0.11-0.25, brain-20k's
 #: one of 0.11.
 GAIN_MIN_EXCESS = 0.02
-#: Default ``SplitConfig.slit_above``: the angle distortion above which a finished chart's
-#: strongest cone is freed by a slit (:func:`_slit_cones`) ...
+#: Default ``SplitConfig.slit_above``: a finished chart whose angle distortion is above this
+#: has its strongest cone freed by a slit (:func:`_slit_cones`). The coarse brains' small charts
+#: hold cones of 0.5-1.7 rad at a vertex, which no flattening takes up without distortion; on
+#: the boundary the rim's turning does. Measured (hashes script over 37 meshes, BENCHMARKS.md
+#: section 0.1, session 26): the 2k brains of seeds 0-5 angle 1.0729-1.0975 -> 1.0607-1.0846,
+#: L2 1.0066-1.0082 -> 1.0042-1.0069, the same charts; at 1.08 with one slit a chart the seed-1
+#: brain ended at 1.0712, over its bound (xatlas + 0.02 = 1.0662).
 SLIT_ABOVE = 1.06
-#: ... kept when the slit chart's own excess is at most ``1 - CONE_SLIT_GAIN`` of the chart's ...
+#: A slit chart is kept when its own excess (``L2^2 - 1`` plus angle ``- 1``) is at most
+#: ``1 - CONE_SLIT_GAIN`` of the chart's (the brains' kept slits removed a median 42-51%) ...
 CONE_SLIT_GAIN = 0.2
-#: ... a chart taking up to this many slits, one per round.
-CONE_SLIT_ROUNDS = 3
-CONE_SLIT_MAX_FACES = 64
-CONE_SLIT_MAX_EDGES = 2
-CONE_MIN_DEFECT = 0.4
+#: ... and lowers the atlas's excess by at least this: brain-20k's few small charts gained
+#: 0.0004 of angle distortion for 1.6 points of utilization (the packer's noise) without it.
 CONE_SLIT_MIN_GAIN = 1e-4
-_MOST = 0.5
+#: The charts tried: of 8 (``STRETCH_MIN_FACES``) to this many faces (the brains' charts of 64+
+#: faces kept 23 of 130 slits tried, at 20k faces solved), whose strongest cone holds at least
+#: this much (radians; the jittered spheres' quarters, 0.3-0.4 rad, kept slits of 27-29% gain at
+#: twice their build's time; the brains' below 0.4: 3 of 7) ...
+CONE_SLIT_MAX_FACES = 64
+CONE_MIN_DEFECT = 0.4
+#: ... at most this many edges from the rim (of 92 longer slits tried, 4 were kept) ...
+CONE_SLIT_MAX_EDGES = 2
+#: ... and holding enough of the atlas's excess that removing this share of it would gain
+#: ``CONE_SLIT_MIN_GAIN`` (the same atlases on the brains and the cow as with no such bound;
+#: the jittered spheres' 420 tiny candidates are not cut and solved in vain) ...
+CONE_SLIT_MOST = 0.5
+#: ... up to this many slits a chart, one per round (2: the seed-1 brain 1.0668, over its bound).
+CONE_SLIT_ROUNDS = 3
 _WARM = True
 #: A piece of at least ``STRAIGHTEN_MIN_FACES`` faces that is bisected gets the border between
 #: its halves straightened by ``STRAIGHTEN_PASSES`` passes of the segmentation's majority
@@ -816,14 +832,17 @@ def _slit_cones(
     helpers: Helpers | None,
 ) -> list[Chart]:
     """Free the strongest cone of every chart whose angle distortion is above ``slit_above``,
-    round by round (at most ``CONE_SLIT_ROUNDS``): the chart is cut along the slit from that cone
-    to its rim (:func:`segparam.mesh.cone_slits`) and solved again, all such charts in one batch
-    (:func:`_solve_batch`); the slit chart replaces the chart when its map is kept (bijective,
-    within the targets) and its own distortion excess (``L2^2 - 1`` plus angle ``- 1``) is at
-    most ``1 - CONE_SLIT_GAIN`` of the chart's. A chart keeps its faces and its place: no chart
-    is added, the slit's edges become seams. The solver's charts only (planar and developable
-    ones are exact), disks of ``STRETCH_MIN_FACES`` to ``BATCH_MAX_VERTICES``. ``V`` is in the
-    stage's unit frame, the charts in mesh indices and units."""
+    round by round (at most ``CONE_SLIT_ROUNDS``): the chart is cut along the shortest edge path
+    from that cone to its rim (:func:`segparam.mesh.cone_slits`) and solved again, all such
+    charts in one batch (:func:`_solve_batch`). The slit chart replaces the chart when its map is
+    kept (bijective, within the targets), its own distortion excess (``L2^2 - 1`` plus angle
+    ``- 1``) is at most ``1 - CONE_SLIT_GAIN`` of the chart's and the atlas's (area-weighted,
+    :func:`_excess`) falls by ``CONE_SLIT_MIN_GAIN`` or more. A chart keeps its faces and its
+    place: no chart is added, the slit's edges become seams. Tried: the solver's charts (planar
+    and developable ones are exact) that are disks of ``STRETCH_MIN_FACES`` to
+    ``CONE_SLIT_MAX_FACES`` faces, whose strongest cone holds ``CONE_MIN_DEFECT`` or more and
+    is at most ``CONE_SLIT_MAX_EDGES`` edges from the rim. ``V, F`` is the mesh in the stage's
+    unit frame, the charts in mesh indices and units."""
     if cfg.slit_above is None:
         return charts
     charts = list(charts)
@@ -837,7 +856,9 @@ def _slit_cones(
             [i for i in solved if charts[i].quality.angle_distortion > cfg.slit_above], np.int64
         )
         if len(cand):  # the others cannot gain enough, whatever their slit
-            cand = cand[_excess([charts[i] for i in cand], area) >= CONE_SLIT_MIN_GAIN / _MOST]
+            cand = cand[
+                _excess([charts[i] for i in cand], area) >= CONE_SLIT_MIN_GAIN / CONE_SLIT_MOST
+            ]
         if len(cand) == 0:
             break
         tried[cand] = True
@@ -849,39 +870,50 @@ def _slit_cones(
         vert_chart = np.repeat(np.arange(len(cand)), nv[cand])
         disks = disk_labels(Fu, vert_chart[Fu[:, 0]], len(cand))
         slits, _ = cone_slits(Vu, Fu, vert_chart, len(cand), min_defect=CONE_MIN_DEFECT)
-        cut = []  # (candidate, its faces on their copies, each copy's vertex in the chart)
-        for j, i in enumerate(cand.tolist()):  # loop over the candidates: one cut each
-            if disks[j] and 0 < len(slits[j]) <= CONE_SLIT_MAX_EDGES:
-                F_cut, copy_of = cut_along(charts[i].local_F, slits[j] - vstart[j])
-                cut.append((i, F_cut, copy_of))
-        if not cut:
+        ok = disks & np.array([0 < len(c) <= CONE_SLIT_MAX_EDGES for c in slits])
+        if not ok.any():
             break
-        n_cut = np.array([len(copy_of) for _, _, copy_of in cut])
+        # the charts that get a slit, cut open at once: each new vertex is a copy of one of the
+        # union's, the first copies in order and then the slits' second ones, which regrouped
+        # by chart is each chart's own cut_along
+        take = np.flatnonzero(ok)
+        face_chart = vert_chart[Fu[:, 0]]
+        rows = np.flatnonzero(ok[face_chart])
+        F_cut, src = cut_along(Fu[rows], np.concatenate([slits[j] for j in take]))
+        by_chart = np.argsort(vert_chart[src], kind="stable")
+        new = np.empty(len(src), dtype=np.int64)
+        new[by_chart] = np.arange(len(src))
+        F_cut, src = new[F_cut], src[by_chart]
+        n_cut = np.bincount(vert_chart[src], minlength=len(cand))[take]
         cstart = np.r_[0, np.cumsum(n_cut)[:-1]]
-        n_faces = np.array([len(F_cut) for _, F_cut, _ in cut])
+        n_faces = np.bincount(face_chart[rows], minlength=len(cand))[take]
+        fstart = np.r_[0, np.cumsum(n_faces)[:-1]]
         maps = _solve_batch(
-            np.concatenate([V[charts[i].vertices[copy_of]] for i, _, copy_of in cut]),
-            np.concatenate([F_cut + cstart[j] for j, (_, F_cut, _) in enumerate(cut)]),
-            np.repeat(np.arange(len(cut)), n_cut), _stretch_limit(n_faces, cfg), cfg, helpers,
+            Vu[src], F_cut, np.repeat(np.arange(len(take)), n_cut), _stretch_limit(n_faces, cfg),
+            cfg, helpers,
         )  # fmt: skip
         q = maps.quality
         kept = q["bijective"] & _within_targets(
             q["angle_distortion"], q["l2_stretch"], n_faces, cfg
         )
-        before = _excess([charts[i] for i, _, _ in cut], np.empty(0), own=True)
+        slit = cand[take]
+        before = _excess([charts[i] for i in slit], np.empty(0), own=True)
         after = (q["l2_stretch"] ** 2 - 1) + (q["angle_distortion"] - 1)
         kept &= after <= (1 - CONE_SLIT_GAIN) * before
-        share = np.array([area[charts[i].faces].sum() for i, _, _ in cut]) / area.sum()
+        share = np.array([area[charts[i].faces].sum() for i in slit]) / area.sum()
         kept &= share * (before - after) >= CONE_SLIT_MIN_GAIN
         records = quality_records(q)
-        for j, (i, F_cut, copy_of) in enumerate(cut):  # loop over the slit charts
-            if kept[j]:
-                c = charts[i]
-                uv = maps.uv[cstart[j] : cstart[j] + n_cut[j]] * size
-                charts[i] = dataclasses.replace(
-                    c, vertices=c.vertices[copy_of], local_F=F_cut, uv=uv, quality=records[j]
-                )
-                tried[i] = False  # it may take another slit next round
+        for j in np.flatnonzero(kept).tolist():  # loop over the slit charts kept
+            i, c = int(slit[j]), charts[slit[j]]
+            v = slice(cstart[j], cstart[j] + n_cut[j])
+            charts[i] = dataclasses.replace(
+                c,
+                vertices=c.vertices[src[v] - vstart[take[j]]],
+                local_F=F_cut[fstart[j] : fstart[j] + n_faces[j]] - cstart[j],
+                uv=maps.uv[v] * size,
+                quality=records[j],
+            )
+            tried[i] = False  # it may take another slit next round
     return charts
 
 
