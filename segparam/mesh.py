@@ -919,9 +919,12 @@ def cone_slits(
 ) -> tuple[list[np.ndarray], np.ndarray]:
     """Per chart of a disjoint union (``vert_chart``: each vertex's chart, ascending), the
     shortest path of edges (3-D length) from its strongest cone, the inner vertex of largest
-    absolute angle defect, to its nearest boundary vertex: the slit that frees that cone
+    positive angle defect, to its nearest boundary vertex: the slit that frees that cone
     (:func:`cut_along`; :func:`segparam.split._slit_cones`). On a boundary vertex the defect is
-    taken up by the boundary's turning, so no map needs to spread it as distortion.
+    taken up by the boundary's turning (the slit opens into a wedge of about that angle), so no
+    map needs to spread it as distortion. A saddle vertex (negative defect) gets none: its
+    slit's sides would have to overlap in the plane (on the 2k brains such slits mapped with
+    angle distortion 1.5-3, or not bijectively).
 
     One defect pass and one multi-source Dijkstra search (from every boundary vertex of every
     chart at once) for the whole union: the charts share no vertex, so every path stays in its
@@ -934,13 +937,13 @@ def cone_slits(
         Per chart, the path's edges as vertex pairs of the union; empty for a chart without a
         boundary or an inner vertex with a defect.
     defect : (n_charts,) float64 ndarray
-        Per chart, its slit's cone's absolute defect (radians; 0 without a slit).
+        Per chart, its slit's cone's defect (radians; 0 without a slit).
     """
     from scipy.sparse.csgraph import dijkstra
 
     out = [np.zeros((0, 2), dtype=np.int64) for _ in range(n_charts)]
     cone = np.zeros(n_charts)
-    strength = np.abs(interior_defect(V, F)[0])
+    strength = interior_defect(V, F)[0]  # a saddle's is negative: no slit
     # each chart's strongest cone: the vertices by chart, then by strength (the first of ties)
     order = np.lexsort((np.arange(len(V)), -strength, vert_chart))
     first = np.searchsorted(vert_chart[order], np.arange(n_charts))

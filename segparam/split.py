@@ -233,15 +233,16 @@ GAIN_MAX_FACES = 160
 GAIN_MIN_EXCESS = 0.02
 #: Default ``SplitConfig.slit_above``: a finished chart whose angle distortion is above this
 #: has its strongest cone freed by a slit (:func:`_slit_cones`). The coarse brains' small charts
-#: hold cones of 0.5-1.7 rad at a vertex, which no flattening takes up without distortion; on
-#: the boundary the rim's turning does. Measured (hashes script over 37 meshes, BENCHMARKS.md
-#: section 0.1, session 26): the 2k brains of seeds 0-5 angle 1.0729-1.0975 -> 1.0607-1.0846,
-#: L2 1.0066-1.0082 -> 1.0042-1.0069, the same charts; at 1.08 with one slit a chart the seed-1
+#: hold cones of 0.5-2 rad at a vertex, which no flattening takes up without distortion; on the
+#: boundary the rim's turning does. Measured (hashes script over 37 meshes, BENCHMARKS.md
+#: section 0.1, session 26): the 2k brains of seeds 0-5 angle 1.0729-1.0975 -> 1.0568-1.0796,
+#: L2 1.0066-1.0082 -> 1.0032-1.0064, the same charts; at 1.08 with one slit a chart the seed-1
 #: brain ended at 1.0712, over its bound (xatlas + 0.02 = 1.0662).
 SLIT_ABOVE = 1.06
 #: A slit chart is kept when its own excess (``L2^2 - 1`` plus angle ``- 1``) is at most
-#: ``1 - CONE_SLIT_GAIN`` of the chart's (the brains' kept slits removed a median 42-51%) ...
-CONE_SLIT_GAIN = 0.2
+#: ``1 - CONE_SLIT_GAIN`` of the chart's (0.2: the 5k brain of seed 2 at 1.0717, over its bound
+#: of 1.0707; 0.1: 1.0699, seams +1%) ...
+CONE_SLIT_GAIN = 0.1
 #: ... and lowers the atlas's excess by at least this: brain-20k's few small charts gained
 #: 0.0004 of angle distortion for 1.6 points of utilization (the packer's noise) without it.
 CONE_SLIT_MIN_GAIN = 1e-4
@@ -257,9 +258,9 @@ CONE_SLIT_MAX_EDGES = 2
 #: ``CONE_SLIT_MIN_GAIN`` (the same atlases on the brains and the cow as with no such bound;
 #: the jittered spheres' 420 tiny candidates are not cut and solved in vain) ...
 CONE_SLIT_MOST = 0.5
-#: ... up to this many slits a chart, one per round (2: the seed-1 brain 1.0668, over its bound).
+#: ... up to this many slits a chart, one per round (2, in a first version: the seed-1 brain
+#: 1.0668, over its bound).
 CONE_SLIT_ROUNDS = 3
-_WARM = True
 #: A piece of at least ``STRAIGHTEN_MIN_FACES`` faces that is bisected gets the border between
 #: its halves straightened by ``STRAIGHTEN_PASSES`` passes of the segmentation's majority
 #: filter (as its own borders, ``SegmentConfig.smoothing``): the Fiedler vector's median cuts

@@ -549,3 +549,10 @@ def test_cone_slits_free_each_charts_strongest_cone_by_the_shortest_way_out():
     # a bound above the apex's defect: no slit at all
     slits, defect = mesh.cone_slits(Vu, Fu, vert_chart, 2, min_defect=strength[apex] + 1e-9)
     assert all(len(s) == 0 for s in slits) and not defect.any()
+    # a saddle's vertices have negative defects: a slit's sides would overlap in the plane
+    from meshes import saddle
+
+    V, F = saddle(8, 8)
+    assert (mesh.interior_defect(V, F)[0] < -1e-3).sum() > 10
+    slits, defect = mesh.cone_slits(V, F, np.zeros(len(V), dtype=np.int64), 1)
+    assert len(slits[0]) == 0 and defect[0] == 0
