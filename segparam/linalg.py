@@ -106,16 +106,38 @@ def spd_solver(A: sp.spmatrix) -> Callable[[np.ndarray], np.ndarray]:
     return lu.solve
 
 
+def spd_solver_entries(
+    rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, n: int
+) -> Callable[[np.ndarray], np.ndarray]:
+    """:func:`spd_solver` of the ``n x n`` matrix with these entries (both triangles, each entry
+    once), without a scipy matrix on the Cholesky path: the entries below the diagonal go to
+    CHOLMOD as they are (a small chart's Poisson matrix, many times an atlas: scipy's
+    construction and ``tril`` cost more than the factorization)."""
+    lower = rows >= cols
+    try:
+        return _cholmod_factor(vals[lower], rows[lower], cols[lower], n)
+    except (ImportError, ArithmeticError) as exc:
+        log.debug("no Cholesky factorization (%r); factorizing with SuperLU", exc)
+    return spd_solver(sp.csc_matrix((vals, (rows, cols)), shape=(n, n)))
+
+
 def _cholmod_solver(A: sp.csc_matrix) -> Callable[[np.ndarray], np.ndarray]:
     """:func:`spd_solver`'s Cholesky path; raises ImportError or ArithmeticError to fall back."""
+    lower = sp.tril(A).tocoo()
+    return _cholmod_factor(lower.data, lower.row, lower.col, A.shape[0])
+
+
+def _cholmod_factor(
+    data: np.ndarray, rows: np.ndarray, cols: np.ndarray, n: int
+) -> Callable[[np.ndarray], np.ndarray]:
+    """The CHOLMOD factorization of the matrix whose lower triangle has these entries."""
     from cvxopt import cholmod, matrix, spmatrix
 
-    lower = sp.tril(A).tocoo()
     M = spmatrix(
-        matrix(lower.data.astype(np.float64)),
-        matrix(lower.row.astype(np.intp)),
-        matrix(lower.col.astype(np.intp)),
-        A.shape,
+        matrix(data.astype(np.float64)),
+        matrix(rows.astype(np.intp)),
+        matrix(cols.astype(np.intp)),
+        (n, n),
     )
     factor = cholmod.symbolic(M, uplo="L")
     cholmod.numeric(M, factor)

@@ -45,7 +45,13 @@ from scipy.sparse.csgraph import connected_components as graph_components
 from scipy.spatial import cKDTree
 
 from .errors import InvalidMeshError, check_choice, check_int, check_number
-from .linalg import lowest_pairs, one_blas_thread, smallest_eigenpairs, spd_solver
+from .linalg import (
+    lowest_pairs,
+    one_blas_thread,
+    smallest_eigenpairs,
+    spd_solver,
+    spd_solver_entries,
+)
 from .mesh import (
     boundary_edges,
     boundary_loops,
@@ -80,6 +86,7 @@ from .refine import (
     _gradient_coefficients,
     gradient_row,
     gradient_transpose,
+    poisson_entries,
     slim_refine,
 )
 from .topology import boundary_half_edges, boundary_pieces
@@ -1861,11 +1868,9 @@ def _arap_charts(
     """
     face_chart = vert_chart[F[:, 0]]
     frames = inverse_frames(triangle_frames(V, F)) if inv_frames is None else inv_frames
-    D = _gradient_operator(V, F, frames)
-    coef = _gradient_coefficients(frames)  # D's rows, per face
+    coef = _gradient_coefficients(frames)  # the rows of the gradient operator D, per face
     all_faces = np.arange(len(F))
     area = face_areas(V, F)
-    w = np.repeat(area, 2)
     w_total = _chart_sum(face_chart, area, n_charts)
     free = np.ones(len(V), dtype=bool)
     free[vstart] = False  # every chart's first vertex is pinned
@@ -1888,10 +1893,9 @@ def _arap_charts(
         if not active.any():
             break
         previous = np.where(active, energy, previous)
-        if solve is None:
-            DT = D.T  # once: a transpose is a new matrix object each time
-            L = (DT @ sp.diags(w) @ D).tocsc()
-            solve = spd_solver(L[free][:, free])
+        if solve is None:  # the Poisson matrix D^T diag(area, twice) D over the free vertices
+            rank = np.where(free, np.cumsum(free) - 1, -1)
+            solve = spd_solver_entries(*poisson_entries(F, coef, area, rank), int(free.sum()))
         rhs = gradient_transpose(F, all_faces, coef, area[:, None, None] * Rt, len(V))
         new = np.zeros_like(uv)
         new[free] = solve(rhs[free])

@@ -297,6 +297,88 @@ def gradient_transpose(F, faces, coef, x, n):  # pragma: no cover - compiled
     return out
 
 
+@njit(cache=True, nogil=True)
+def poisson_entries(F, coef, area, rank):  # pragma: no cover - compiled
+    """The entries of ``L[free][:, free]`` for ``L = D^T diag(w) D`` (``w``: each face's
+    ``area`` for both of its rows of ``D``, the gradient operator), without the sparse matrices:
+    ARAP's Poisson matrix (:func:`segparam.parameterize._arap_charts`). ``rank`` numbers the
+    free vertices ``0 ..`` (-1: pinned).
+
+    The same bits as scipy's ``(D.T @ sp.diags(w) @ D)[free][:, free]``: entry ``(i, j)`` sums
+    ``D[r, j] * (w[r] * D[r, i])`` from 0.0 over the rows ``r`` of ``D`` in order (a face naming
+    a vertex twice as one corner, :func:`gradient_row`), and entries that sum to zero are
+    dropped, as scipy's product drops them.
+
+    Returns
+    -------
+    rows, cols : (e,) int64 ndarrays
+    vals : (e,) float64 ndarray
+        Both triangles, each entry once, by row then column.
+    """
+    m = len(F)
+    n = 0
+    for v in range(len(rank)):
+        n = max(n, rank[v] + 1)
+    vs = np.empty(3, dtype=np.int64)
+    cs = np.empty(3)
+    # each row's terms in the order of D's rows (two passes: count, then fill)
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    for t in range(m):
+        for k in range(2):
+            n_c, vs[0], vs[1], vs[2], cs[0], cs[1], cs[2] = gradient_row(F, t, coef, k)
+            for a in range(n_c):
+                i = rank[vs[a]]
+                if i >= 0:
+                    for b in range(n_c):
+                        if rank[vs[b]] >= 0:
+                            ptr[i + 1] += 1
+    for i in range(n):
+        ptr[i + 1] += ptr[i]
+    fill = ptr[:-1].copy()
+    col = np.empty(ptr[n], dtype=np.int64)
+    term = np.empty(ptr[n])
+    for t in range(m):
+        w = area[t]
+        for k in range(2):
+            n_c, vs[0], vs[1], vs[2], cs[0], cs[1], cs[2] = gradient_row(F, t, coef, k)
+            for a in range(n_c):
+                i = rank[vs[a]]
+                if i < 0:
+                    continue
+                wa = w * cs[a]
+                for b in range(n_c):
+                    j = rank[vs[b]]
+                    if j >= 0:
+                        col[fill[i]] = j
+                        term[fill[i]] = cs[b] * wa
+                        fill[i] += 1
+    # per row, the terms by column (a stable insertion sort: a row holds a few dozen), summed
+    rows = np.empty(ptr[n], dtype=np.int64)
+    cols = np.empty(ptr[n], dtype=np.int64)
+    vals = np.empty(ptr[n])
+    out = 0
+    for i in range(n):
+        lo, hi = ptr[i], ptr[i + 1]
+        for q in range(lo + 1, hi):
+            cq, tq = col[q], term[q]
+            p = q - 1
+            while p >= lo and col[p] > cq:
+                col[p + 1], term[p + 1] = col[p], term[p]
+                p -= 1
+            col[p + 1], term[p + 1] = cq, tq
+        q = lo
+        while q < hi:
+            j = col[q]
+            acc = 0.0
+            while q < hi and col[q] == j:
+                acc += term[q]
+                q += 1
+            if acc != 0.0:
+                rows[out], cols[out], vals[out] = i, j, acc
+                out += 1
+    return rows[:out], cols[:out], vals[:out]
+
+
 def slim_refine(
     V: np.ndarray,
     F: np.ndarray,

@@ -63,6 +63,31 @@ def test_spd_solver_falls_back_on_an_indefinite_matrix():
     np.testing.assert_allclose(A @ x, b, atol=1e-12)
 
 
+def test_spd_solver_from_entries_is_spd_solver(K, monkeypatch):
+    # The same matrix given as entries (both triangles, any order): the same lower triangle goes
+    # to CHOLMOD, so the same solution to the last bit; without cvxopt, and on an indefinite
+    # matrix, SuperLU's.
+    n = K.shape[0]
+    A = (K + 1e-3 * abs(K).sum(axis=0).max() * sp.identity(n)).tocoo()
+    order = np.random.default_rng(0).permutation(A.nnz)
+    rows, cols, vals = A.row[order], A.col[order], A.data[order]
+    B = np.random.default_rng(1).standard_normal((n, 3))
+    want = linalg.spd_solver(A.tocsc())(B)
+    assert linalg.spd_solver_entries(rows, cols, vals, n)(B).tobytes() == want.tobytes()
+    I = sp.diags([2.0, -3.0, 4.0, 5.0]) + sp.diags([np.ones(3), np.ones(3)], [-1, 1])
+    I = I.tocoo()
+    b = np.arange(1.0, 5.0)
+    x = linalg.spd_solver_entries(I.row, I.col, I.data, 4)(b)
+    np.testing.assert_allclose(I @ x, b, atol=1e-12)
+    monkeypatch.setattr(linalg, "_cholmod_factor", _no_cholmod_factor)
+    X = linalg.spd_solver_entries(rows, cols, vals, n)(B)
+    np.testing.assert_allclose(A @ X, B, atol=1e-9 * np.abs(B).max())
+
+
+def _no_cholmod_factor(*args):
+    raise ImportError("cvxopt hidden by the test")
+
+
 def test_fixed_pattern_refactorizes_new_values(K):
     """One pattern, two sets of values (repeated entries summed): each factorization solves its
     own matrix, the symbolic step of the first reused by the second; an indefinite set falls

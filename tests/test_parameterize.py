@@ -534,6 +534,50 @@ def test_the_compiled_arap_steps_are_the_sparse_ones_bit_for_bit(seed):
     assert got_rhs.tobytes() == rhs.tobytes()
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_the_compiled_poisson_matrix_is_the_sparse_one_bit_for_bit(seed):
+    """ARAP's Poisson matrix over the free vertices (``poisson_entries``) against the sparse
+    product it replaced, ``(D^T diag(w) D)[free][:, free]``, entry for entry and to the last
+    bit: random faces (odd seeds: some naming a vertex twice), random areas, pinned vertices;
+    and a grid of right triangles, whose diagonals' entries cancel to zeros scipy drops."""
+    import scipy.sparse as sp
+
+    from segparam.parameterize import _gradient_operator
+    from segparam.quality import inverse_frames, triangle_frames
+    from segparam.refine import _gradient_coefficients, poisson_entries
+
+    rng = np.random.default_rng(seed)
+    if seed < 5:
+        n, m = 30, 80
+        V = rng.normal(size=(n, 3))
+        F = np.array([rng.choice(n, 3, replace=False) for _ in range(m)])
+        if seed % 2:
+            F[:5, 1] = F[:5, 0]  # a repeated corner
+        area = rng.random(m)
+    else:  # unit squares cut along a diagonal: the diagonals' entries cancel to exactly 0
+        x, y = np.meshgrid(np.arange(4.0), np.arange(3.0))
+        V = np.c_[x.ravel(), y.ravel(), np.zeros(12)]
+        a = (np.arange(3) + 4 * np.arange(2)[:, None]).ravel()
+        F = np.r_[np.c_[a, a + 1, a + 5], np.c_[a, a + 5, a + 4]]
+        n, m = len(V), len(F)
+        area = np.full(m, 0.5)
+    with np.errstate(divide="ignore", invalid="ignore"):  # the repeated corners' frames
+        frames = inverse_frames(triangle_frames(V, F))
+    frames[~np.isfinite(frames)] = 1.0
+    free = rng.random(n) > 0.1
+    D = _gradient_operator(V, F, frames)
+    want = (D.T @ sp.diags(np.repeat(area, 2)) @ D).tocsc()[free][:, free].tocoo()
+    rank = np.where(free, np.cumsum(free) - 1, -1)
+    rows, cols, vals = poisson_entries(F, _gradient_coefficients(frames), area, rank)
+    want_entries = sorted(
+        zip(want.row.tolist(), want.col.tolist(), want.data.tolist(), strict=True)
+    )
+    assert list(zip(rows.tolist(), cols.tolist(), vals.tolist(), strict=True)) == want_entries
+    if seed == 5:  # the grid: pairs of free corners of a face whose entry summed to zero
+        pairs = {(a, b) for f in rank[F].tolist() for a in f for b in f if a >= 0 and b >= 0}
+        assert len(pairs) > len(want_entries)
+
+
 def test_isometric_fit_undoes_a_stretch_by_hand():
     """Y = X R S (a rotation, then a stretch along the axes): M = S^-2 fits every triangle
     exactly (G_t^T M G_t = I), A = M^(1/2) = S^-1, so uv = Y S^-1 = X R, the flat chart rotated."""
