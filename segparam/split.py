@@ -834,88 +834,124 @@ def _slit_cones(
 ) -> list[Chart]:
     """Free the strongest cone of every chart whose angle distortion is above ``slit_above``,
     round by round (at most ``CONE_SLIT_ROUNDS``): the chart is cut along the shortest edge path
-    from that cone to its rim (:func:`segparam.mesh.cone_slits`) and solved again, all such
-    charts in one batch (:func:`_solve_batch`). The slit chart replaces the chart when its map is
-    kept (bijective, within the targets), its own distortion excess (``L2^2 - 1`` plus angle
+    from that cone to its rim (:func:`_cut_at_cones`) and solved again, all such charts in one
+    batch (:func:`_solve_batch`). The slit chart replaces the chart when its map is kept
+    (bijective, within the targets), its own distortion excess (``L2^2 - 1`` plus angle
     ``- 1``) is at most ``1 - CONE_SLIT_GAIN`` of the chart's and the atlas's (area-weighted,
     :func:`_excess`) falls by ``CONE_SLIT_MIN_GAIN`` or more. A chart keeps its faces and its
-    place: no chart is added, the slit's edges become seams. Tried: the solver's charts (planar
-    and developable ones are exact) that are disks of ``STRETCH_MIN_FACES`` to
-    ``CONE_SLIT_MAX_FACES`` faces, whose strongest cone holds ``CONE_MIN_DEFECT`` or more and
-    is at most ``CONE_SLIT_MAX_EDGES`` edges from the rim. ``V, F`` is the mesh in the stage's
-    unit frame, the charts in mesh indices and units."""
+    place: no chart is added, the slit's edges become seams. ``V, F`` is the mesh in the
+    stage's unit frame, the charts in mesh indices and units."""
     if cfg.slit_above is None:
         return charts
     charts = list(charts)
     area = face_areas(V, F)
     tried = np.zeros(len(charts), dtype=bool)
     for _ in range(CONE_SLIT_ROUNDS):
-        nf = np.array([len(c.faces) for c in charts])
-        cand = np.flatnonzero(~tried & (nf >= STRETCH_MIN_FACES) & (nf <= CONE_SLIT_MAX_FACES))
-        solved = [i for i in cand.tolist() if charts[i].method == "hessian"]
-        cand = np.array(
-            [i for i in solved if charts[i].quality.angle_distortion > cfg.slit_above], np.int64
-        )
-        if len(cand):  # the others cannot gain enough, whatever their slit
-            cand = cand[
-                _excess([charts[i] for i in cand], area) >= CONE_SLIT_MIN_GAIN / CONE_SLIT_MOST
-            ]
-        if len(cand) == 0:
-            break
+        cand = _cone_slit_candidates(charts, tried, area, cfg)
         tried[cand] = True
-        nv = np.array([len(c.vertices) for c in charts])
-        # the candidates as one union of their own vertices (copies of a seam's vertices apart)
-        Vu = np.concatenate([V[charts[i].vertices] for i in cand])
-        vstart = np.r_[0, np.cumsum(nv[cand])[:-1]]
-        Fu = np.concatenate([charts[i].local_F + vstart[j] for j, i in enumerate(cand)])
-        vert_chart = np.repeat(np.arange(len(cand)), nv[cand])
-        disks = disk_labels(Fu, vert_chart[Fu[:, 0]], len(cand))
-        slits, _ = cone_slits(Vu, Fu, vert_chart, len(cand), min_defect=CONE_MIN_DEFECT)
-        ok = disks & np.array([0 < len(c) <= CONE_SLIT_MAX_EDGES for c in slits])
-        if not ok.any():
+        cut = _cut_at_cones(V, charts, cand)
+        if cut is None:
             break
-        # the charts that get a slit, cut open at once: each new vertex is a copy of one of the
-        # union's, the first copies in order and then the slits' second ones, which regrouped
-        # by chart is each chart's own cut_along
-        take = np.flatnonzero(ok)
-        face_chart = vert_chart[Fu[:, 0]]
-        rows = np.flatnonzero(ok[face_chart])
-        F_cut, src = cut_along(Fu[rows], np.concatenate([slits[j] for j in take]))
-        by_chart = np.argsort(vert_chart[src], kind="stable")
-        new = np.empty(len(src), dtype=np.int64)
-        new[by_chart] = np.arange(len(src))
-        F_cut, src = new[F_cut], src[by_chart]
-        n_cut = np.bincount(vert_chart[src], minlength=len(cand))[take]
-        cstart = np.r_[0, np.cumsum(n_cut)[:-1]]
-        n_faces = np.bincount(face_chart[rows], minlength=len(cand))[take]
-        fstart = np.r_[0, np.cumsum(n_faces)[:-1]]
+        n_faces = np.diff(cut.fptr)
         maps = _solve_batch(
-            Vu[src], F_cut, np.repeat(np.arange(len(take)), n_cut), _stretch_limit(n_faces, cfg),
-            cfg, helpers,
-        )  # fmt: skip
+            cut.V, cut.F, cut.vert_chart, _stretch_limit(n_faces, cfg), cfg, helpers
+        )
         q = maps.quality
+        before = _excess([charts[i] for i in cut.charts], np.empty(0), own=True)
+        after = (q["l2_stretch"] ** 2 - 1) + (q["angle_distortion"] - 1)
+        share = np.array([area[charts[i].faces].sum() for i in cut.charts]) / area.sum()
         kept = q["bijective"] & _within_targets(
             q["angle_distortion"], q["l2_stretch"], n_faces, cfg
         )
-        slit = cand[take]
-        before = _excess([charts[i] for i in slit], np.empty(0), own=True)
-        after = (q["l2_stretch"] ** 2 - 1) + (q["angle_distortion"] - 1)
         kept &= after <= (1 - CONE_SLIT_GAIN) * before
-        share = np.array([area[charts[i].faces].sum() for i in slit]) / area.sum()
         kept &= share * (before - after) >= CONE_SLIT_MIN_GAIN
         records = quality_records(q)
         for j in np.flatnonzero(kept).tolist():  # loop over the slit charts kept
-            i, c = int(slit[j]), charts[slit[j]]
-            v = slice(cstart[j], cstart[j] + n_cut[j])
-            charts[i] = dataclasses.replace(
-                c,
-                vertices=c.vertices[src[v] - vstart[take[j]]],
-                local_F=F_cut[fstart[j] : fstart[j] + n_faces[j]] - cstart[j],
-                uv=maps.uv[v] * size,
-                quality=records[j],
-            )
+            i = int(cut.charts[j])
+            charts[i] = cut.chart(j, charts[i], maps.uv * size, records[j])
             tried[i] = False  # it may take another slit next round
     return charts
+
+
+def _cone_slit_candidates(
+    charts: list[Chart], tried: np.ndarray, area: np.ndarray, cfg: SplitConfig
+) -> np.ndarray:
+    """The charts :func:`_slit_cones` tries this round: not tried yet, solver's charts (planar
+    and developable ones are exact) of ``STRETCH_MIN_FACES`` to ``CONE_SLIT_MAX_FACES`` faces
+    over ``slit_above``, holding enough of the atlas's excess that removing ``CONE_SLIT_MOST``
+    of it would gain ``CONE_SLIT_MIN_GAIN``."""
+    nf = np.array([len(c.faces) for c in charts])
+    cand = np.flatnonzero(~tried & (nf >= STRETCH_MIN_FACES) & (nf <= CONE_SLIT_MAX_FACES))
+    solved = [i for i in cand.tolist() if charts[i].method == "hessian"]
+    cand = np.array(
+        [i for i in solved if charts[i].quality.angle_distortion > cfg.slit_above], np.int64
+    )
+    if len(cand) == 0:
+        return cand
+    return cand[_excess([charts[i] for i in cand], area) >= CONE_SLIT_MIN_GAIN / CONE_SLIT_MOST]
+
+
+@dataclass(frozen=True)
+class _ConeCuts:
+    """Charts cut open at their strongest cones (:func:`_cut_at_cones`), as one union ordered
+    by chart: chart ``j`` (``charts[j]`` of the list) has the vertices ``vptr[j] .. vptr[j +
+    1]`` of ``V`` (``own``: each one's vertex in that chart, the slit's twice) and the faces
+    ``fptr[j] .. fptr[j + 1]`` of ``F``."""
+
+    charts: np.ndarray
+    V: np.ndarray
+    F: np.ndarray
+    own: np.ndarray
+    vptr: np.ndarray
+    fptr: np.ndarray
+
+    @property
+    def vert_chart(self) -> np.ndarray:
+        return np.repeat(np.arange(len(self.charts)), np.diff(self.vptr))
+
+    def chart(self, j: int, chart: Chart, uv: np.ndarray, quality: ChartQuality) -> Chart:
+        """``chart`` (cut ``j``'s chart) cut open, with its rows of the union's ``uv``."""
+        v = slice(self.vptr[j], self.vptr[j + 1])
+        return dataclasses.replace(
+            chart,
+            vertices=chart.vertices[self.own[v]],
+            local_F=self.F[self.fptr[j] : self.fptr[j + 1]] - self.vptr[j],
+            uv=uv[v],
+            quality=quality,
+        )
+
+
+def _cut_at_cones(V: np.ndarray, charts: list[Chart], cand: np.ndarray) -> _ConeCuts | None:
+    """The charts ``cand`` that are disks with a cone of ``CONE_MIN_DEFECT`` or more at most
+    ``CONE_SLIT_MAX_EDGES`` edges from the rim, each cut along that shortest slit
+    (:func:`segparam.mesh.cone_slits`), or None if there is none. The candidates go as one union
+    of their own vertices (a seam's copies apart) through the disk test, the slits and one
+    :func:`segparam.mesh.cut_along`: each new vertex is a copy of one of the union's, the first
+    copies in order and then the slits' second ones, which regrouped by chart is each chart's
+    own cut, bit for bit."""
+    if len(cand) == 0:
+        return None
+    nv = np.array([len(charts[i].vertices) for i in cand])
+    vstart = np.r_[0, np.cumsum(nv)[:-1]]
+    Vu = np.concatenate([V[charts[i].vertices] for i in cand])
+    Fu = np.concatenate([charts[i].local_F + vstart[j] for j, i in enumerate(cand)])
+    vert_chart = np.repeat(np.arange(len(cand)), nv)
+    face_chart = vert_chart[Fu[:, 0]]
+    disks = disk_labels(Fu, face_chart, len(cand))
+    slits, _ = cone_slits(Vu, Fu, vert_chart, len(cand), min_defect=CONE_MIN_DEFECT)
+    take = np.flatnonzero(disks & np.array([0 < len(c) <= CONE_SLIT_MAX_EDGES for c in slits]))
+    if len(take) == 0:
+        return None
+    rows = np.flatnonzero(np.isin(face_chart, take))
+    F_cut, src = cut_along(Fu[rows], np.concatenate([slits[j] for j in take]))
+    by_chart = np.argsort(vert_chart[src], kind="stable")
+    new = np.empty(len(src), dtype=np.int64)
+    new[by_chart] = np.arange(len(src))
+    src = src[by_chart]
+    vptr = np.r_[0, np.cumsum(np.bincount(vert_chart[src], minlength=len(cand))[take])]
+    fptr = np.r_[0, np.cumsum(np.bincount(face_chart[rows], minlength=len(cand))[take])]
+    own = src - vstart[vert_chart[src]]
+    return _ConeCuts(cand[take], Vu[src], new[F_cut], own, vptr, fptr)
 
 
 def _hopeless(
