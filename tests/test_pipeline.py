@@ -172,3 +172,28 @@ def test_default_toml_matches_the_dataclass_defaults():
 
     root = Path(__file__).resolve().parents[1] / "pipelines"
     assert load_config(root / "default.toml") == PipelineConfig()
+
+
+def test_default_toml_lists_every_key():
+    # As its header says: every key with its default, the ones without a value commented out.
+    import dataclasses
+    import re
+    from pathlib import Path
+
+    from segparam.pipeline import _SECTIONS, tomllib  # tomli on Python 3.10
+
+    text = (Path(__file__).resolve().parents[1] / "pipelines" / "default.toml").read_text()
+    tables = tomllib.loads(text)
+    section = None
+    commented = set()
+    for line in text.splitlines():  # loop over the file's lines: the commented-out keys
+        if m := re.match(r"\[(\w+)\]", line):
+            section = m.group(1)
+        elif m := re.match(r"# (\w+) = ", line):
+            commented.add((section, m.group(1)))
+    for name, cls in _SECTIONS.items():
+        for f in dataclasses.fields(cls):
+            if f.default is None:
+                assert (name, f.name) in commented, (name, f.name)
+            else:
+                assert f.name in tables[name], (name, f.name)
