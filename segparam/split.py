@@ -849,17 +849,20 @@ def _slit_cones(
     for _ in range(CONE_SLIT_ROUNDS):
         cand = _cone_slit_candidates(charts, tried, area, cfg)
         tried[cand] = True
-        cut = _cut_at_cones(V, charts, cand)
+        cut = _cut_at_cones(
+            V, [charts[i].vertices for i in cand], [charts[i].local_F for i in cand]
+        )
         if cut is None:
             break
+        slit = cand[cut.which]
         n_faces = np.diff(cut.fptr)
         maps = _solve_batch(
             cut.V, cut.F, cut.vert_chart, _stretch_limit(n_faces, cfg), cfg, helpers
         )
         q = maps.quality
-        before = _excess([charts[i] for i in cut.charts], np.empty(0), own=True)
+        before = _excess([charts[i] for i in slit], np.empty(0), own=True)
         after = (q["l2_stretch"] ** 2 - 1) + (q["angle_distortion"] - 1)
-        share = np.array([area[charts[i].faces].sum() for i in cut.charts]) / area.sum()
+        share = np.array([area[charts[i].faces].sum() for i in slit]) / area.sum()
         kept = q["bijective"] & _within_targets(
             q["angle_distortion"], q["l2_stretch"], n_faces, cfg
         )
@@ -867,8 +870,12 @@ def _slit_cones(
         kept &= share * (before - after) >= CONE_SLIT_MIN_GAIN
         records = quality_records(q)
         for j in np.flatnonzero(kept).tolist():  # loop over the slit charts kept
-            i = int(cut.charts[j])
-            charts[i] = cut.chart(j, charts[i], maps.uv * size, records[j])
+            i = int(slit[j])
+            own, local_F, v = cut.piece(j)
+            charts[i] = dataclasses.replace(
+                charts[i], vertices=charts[i].vertices[own], local_F=local_F,
+                uv=maps.uv[v] * size, quality=records[j],
+            )  # fmt: skip
             tried[i] = False  # it may take another slit next round
     return charts
 
@@ -893,12 +900,12 @@ def _cone_slit_candidates(
 
 @dataclass(frozen=True)
 class _ConeCuts:
-    """Charts cut open at their strongest cones (:func:`_cut_at_cones`), as one union ordered
-    by chart: chart ``j`` (``charts[j]`` of the list) has the vertices ``vptr[j] .. vptr[j +
-    1]`` of ``V`` (``own``: each one's vertex in that chart, the slit's twice) and the faces
+    """Pieces cut open at their strongest cones (:func:`_cut_at_cones`), as one union ordered by
+    piece: piece ``j`` (``which[j]`` of the lists given) has the vertices ``vptr[j] .. vptr[j +
+    1]`` of ``V`` (``own``: each one's vertex in that piece, the slit's twice) and the faces
     ``fptr[j] .. fptr[j + 1]`` of ``F``."""
 
-    charts: np.ndarray
+    which: np.ndarray
     V: np.ndarray
     F: np.ndarray
     own: np.ndarray
@@ -907,38 +914,36 @@ class _ConeCuts:
 
     @property
     def vert_chart(self) -> np.ndarray:
-        return np.repeat(np.arange(len(self.charts)), np.diff(self.vptr))
+        return np.repeat(np.arange(len(self.which)), np.diff(self.vptr))
 
-    def chart(self, j: int, chart: Chart, uv: np.ndarray, quality: ChartQuality) -> Chart:
-        """``chart`` (cut ``j``'s chart) cut open, with its rows of the union's ``uv``."""
+    def piece(self, j: int) -> tuple[np.ndarray, np.ndarray, slice]:
+        """Piece ``j`` cut open: each new vertex's vertex in the piece, the faces on the new
+        vertices, and the piece's rows of the union's vertices (of ``V``, of a map of it)."""
         v = slice(self.vptr[j], self.vptr[j + 1])
-        return dataclasses.replace(
-            chart,
-            vertices=chart.vertices[self.own[v]],
-            local_F=self.F[self.fptr[j] : self.fptr[j + 1]] - self.vptr[j],
-            uv=uv[v],
-            quality=quality,
-        )
+        return self.own[v], self.F[self.fptr[j] : self.fptr[j + 1]] - self.vptr[j], v
 
 
-def _cut_at_cones(V: np.ndarray, charts: list[Chart], cand: np.ndarray) -> _ConeCuts | None:
-    """The charts ``cand`` that are disks with a cone of ``CONE_MIN_DEFECT`` or more at most
+def _cut_at_cones(
+    V: np.ndarray, vertices: list[np.ndarray], faces: list[np.ndarray]
+) -> _ConeCuts | None:
+    """The pieces (``vertices[k]``: the rows of ``V`` of piece ``k``'s vertices, ``faces[k]``
+    its faces on them) that are disks with a cone of ``CONE_MIN_DEFECT`` or more at most
     ``CONE_SLIT_MAX_EDGES`` edges from the rim, each cut along that shortest slit
-    (:func:`segparam.mesh.cone_slits`), or None if there is none. The candidates go as one union
-    of their own vertices (a seam's copies apart) through the disk test, the slits and one
+    (:func:`segparam.mesh.cone_slits`), or None if there is none. The pieces go as one union of
+    their own vertices through the disk test, the slits and one
     :func:`segparam.mesh.cut_along`: each new vertex is a copy of one of the union's, the first
-    copies in order and then the slits' second ones, which regrouped by chart is each chart's
+    copies in order and then the slits' second ones, which regrouped by piece is each piece's
     own cut, bit for bit."""
-    if len(cand) == 0:
+    if len(vertices) == 0:
         return None
-    nv = np.array([len(charts[i].vertices) for i in cand])
+    nv = np.array([len(v) for v in vertices])
     vstart = np.r_[0, np.cumsum(nv)[:-1]]
-    Vu = np.concatenate([V[charts[i].vertices] for i in cand])
-    Fu = np.concatenate([charts[i].local_F + vstart[j] for j, i in enumerate(cand)])
-    vert_chart = np.repeat(np.arange(len(cand)), nv)
+    Vu = np.concatenate([V[v] for v in vertices])
+    Fu = np.concatenate([f + vstart[j] for j, f in enumerate(faces)])
+    vert_chart = np.repeat(np.arange(len(vertices)), nv)
     face_chart = vert_chart[Fu[:, 0]]
-    disks = disk_labels(Fu, face_chart, len(cand))
-    slits, _ = cone_slits(Vu, Fu, vert_chart, len(cand), min_defect=CONE_MIN_DEFECT)
+    disks = disk_labels(Fu, face_chart, len(vertices))
+    slits, _ = cone_slits(Vu, Fu, vert_chart, len(vertices), min_defect=CONE_MIN_DEFECT)
     take = np.flatnonzero(disks & np.array([0 < len(c) <= CONE_SLIT_MAX_EDGES for c in slits]))
     if len(take) == 0:
         return None
@@ -948,10 +953,10 @@ def _cut_at_cones(V: np.ndarray, charts: list[Chart], cand: np.ndarray) -> _Cone
     new = np.empty(len(src), dtype=np.int64)
     new[by_chart] = np.arange(len(src))
     src = src[by_chart]
-    vptr = np.r_[0, np.cumsum(np.bincount(vert_chart[src], minlength=len(cand))[take])]
-    fptr = np.r_[0, np.cumsum(np.bincount(face_chart[rows], minlength=len(cand))[take])]
+    vptr = np.r_[0, np.cumsum(np.bincount(vert_chart[src], minlength=len(vertices))[take])]
+    fptr = np.r_[0, np.cumsum(np.bincount(face_chart[rows], minlength=len(vertices))[take])]
     own = src - vstart[vert_chart[src]]
-    return _ConeCuts(cand[take], Vu[src], new[F_cut], own, vptr, fptr)
+    return _ConeCuts(take, Vu[src], new[F_cut], own, vptr, fptr)
 
 
 def _hopeless(
