@@ -344,6 +344,8 @@ def build_report(atlas: Atlas) -> dict[str, Any]:
                 "depth": int(c.depth),
                 "splits_of_source": int(atlas.charts.splits[c.source]),
                 "method": c.method,
+                # vertices the chart holds twice: a slit's or an opened tube's cut, both sides seams
+                "cut_vertices": int(len(c.vertices) - len(np.unique(c.vertices))),
                 "bijective": bool(q.bijective),
                 "flipped": int(q.n_flipped),
                 "l2_stretch": q.l2_stretch,
@@ -388,6 +390,7 @@ def build_report(atlas: Atlas) -> dict[str, Any]:
             "faces": int(len(F)),
             "flipped_triangles": flipped,
             "bijective_charts": int(sum(c.quality.bijective for c in atlas.charts.charts)),
+            "charts_cut_open": int(sum(r["cut_vertices"] > 0 for r in charts)),
             "utilization": atlas.packing.utilization,
             "resolution": atlas.packing.resolution,
             "padding": atlas.packing.padding,

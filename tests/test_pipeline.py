@@ -68,6 +68,10 @@ def check_atlas(atlas):
     assert a["l2_stretch"] == pytest.approx(d["l2_stretch"])
     per_chart_faces = sum(r["faces"] for r in report["charts"])
     assert per_chart_faces == len(F)
+    for k, r in enumerate(report["charts"]):  # a cut's vertices: uv copies of one mesh vertex
+        mine = atlas.chart_of_face == k
+        assert r["cut_vertices"] == len(np.unique(uvF[mine])) - len(np.unique(F[mine]))
+    assert a["charts_cut_open"] == sum(r["cut_vertices"] > 0 for r in report["charts"])
     seg = report["segmentation"]  # charts cut before a solve were not bijective on a first try
     assert seg["cut_untried"] == int(atlas.charts.cut_untried.sum())
     assert seg["first_pass_bijective"] + seg["cut_untried"] <= seg["charts"]
@@ -197,3 +201,18 @@ def test_default_toml_lists_every_key():
                 assert (name, f.name) in commented, (name, f.name)
             else:
                 assert f.name in tables[name], (name, f.name)
+
+
+def test_a_chart_slit_at_its_cone_is_one_chart_with_its_cut_in_the_report():
+    # A flat grid with a cone one edge from its rim: one chart, cut along that edge (the cone
+    # slit of the split stage); its uvs hold the rim vertex twice, and the report says so.
+    V, F = tri_grid(6, 6)
+    V = np.c_[V[:, :2], np.zeros(len(V))]
+    V[int(np.argmin(((V[:, :2] - [0.5, 0.2]) ** 2).sum(axis=1))), 2] = 0.15
+    atlas = build_atlas(V, F, PipelineConfig().replace(remesh={"mode": "off"}), seed=0)
+    report = check_atlas(atlas)
+    assert report["atlas"]["charts"] == 1 and report["atlas"]["charts_cut_open"] == 1
+    assert report["charts"][0]["cut_vertices"] == 1
+    plain = PipelineConfig().replace(remesh={"mode": "off"}, split={"slit_above": None})
+    report = check_atlas(build_atlas(V, F, plain, seed=0))
+    assert report["atlas"]["charts_cut_open"] == 0
