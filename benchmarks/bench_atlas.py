@@ -567,6 +567,47 @@ def show_stages(rows: list[dict]) -> None:
         )
 
 
+#: The issues' goals against xatlas on the same mesh (issue 13: time; issue 14: valid, no more
+#: charts, L2 stretch no more, angle distortion within 0.02, utilization 0.70 or more).
+ANGLE_SLACK = 0.02
+MIN_UTILIZATION = 0.70
+
+
+def goals(seg: dict, xat: dict) -> dict[str, bool]:
+    """Which goals segparam's row ``seg`` meets against xatlas's row ``xat`` of the same run."""
+    return {
+        "time": seg["seconds"] <= xat["seconds"],
+        "valid": seg["flipped"] == 0 and seg["mirrored_charts"] == 0 and seg["overlap_texels"] == 0,
+        "charts": seg["charts"] <= xat["charts"],
+        "l2": seg["l2_stretch"] <= xat["l2_stretch"],
+        "angle": seg["angle_distortion"] <= xat["angle_distortion"] + ANGLE_SLACK,
+        "utilization": seg["utilization"] >= MIN_UTILIZATION,
+    }
+
+
+def show_goals(rows: list[dict]) -> None:
+    """One line per segparam row (default settings, remeshing off): each goal met or not."""
+    seg = [r for r in rows if "goals" in r]
+    if not seg:
+        return
+    names = list(seg[0]["goals"])
+    print(
+        "\ngoals against xatlas (time <=; valid; charts <=; L2 <=; angle <= xatlas + "
+        f"{ANGLE_SLACK}; utilization >= {MIN_UTILIZATION})"
+    )
+    print(f"{'mesh':{NAME_W}s} " + " ".join(f"{k:>11s}" for k in names) + "   missed")
+    for r in seg:
+        g = r["goals"]
+        missed = [k for k in names if not g[k]]
+        print(
+            f"{r['mesh']:{NAME_W}s} "
+            + " ".join(f"{'yes' if g[k] else 'NO':>11s}" for k in names)
+            + f"   {len(missed)}"
+        )
+    every = {k: sum(r["goals"][k] for r in seg) for k in names}
+    print(f"{'met on':{NAME_W}s} " + " ".join(f"{f'{v}/{len(seg)}':>11s}" for v in every.values()))
+
+
 def _json_ready(value):
     if isinstance(value, dict):
         return {k: _json_ready(v) for k, v in value.items()}
@@ -631,9 +672,11 @@ def main() -> None:
             if r["tool"] == "segparam":
                 r["auto_would_remesh"] = bool(auto)
                 r["auto_reason"] = reason
+                r["goals"] = goals(r, mesh_rows[-1])
             show_row(r)
         rows.extend(mesh_rows)
     show_stages(rows)
+    show_goals(rows)
 
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
