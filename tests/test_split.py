@@ -891,6 +891,10 @@ def test_a_cone_by_the_rim_is_freed_by_a_slit_not_a_new_chart():
     assert own[1] <= (1 - split.CONE_SLIT_GAIN) * own[0]
     assert c.quality.angle_distortion < p.quality.angle_distortion
     assert c.quality.l2_stretch < p.quality.l2_stretch
+    # a bound above the chart's angle distortion: no slit
+    high = SplitConfig(min_split_gain=None, slit_above=p.quality.angle_distortion + 1e-6)
+    (h,) = parameterize_charts(V, F, labels, config=high).charts
+    assert len(h.vertices) == len(np.unique(h.vertices))
 
 
 @pytest.mark.parametrize(
@@ -901,6 +905,8 @@ def test_a_cone_by_the_rim_is_freed_by_a_slit_not_a_new_chart():
         ("CONE_SLIT_MAX_EDGES", 0),  # the slit (one edge) is too long
         ("CONE_SLIT_MIN_GAIN", 1.0),  # no slit can lower the atlas's excess that much
         ("CONE_SLIT_GAIN", 0.99),  # the slit removes less than that of the chart's excess
+        ("CONE_SLIT_MOST", 1e-6),  # not even all of the chart's excess would gain enough
+        ("CONE_SLIT_ROUNDS", 0),  # no round
     ],
 )
 def test_a_cone_slit_is_tried_and_kept_only_within_its_bounds(monkeypatch, gate, value):
