@@ -611,7 +611,9 @@ def parameterize_charts(
     Small charts are mapped in bulk first (:func:`_bulk_charts`); the others, and the small ones
     that fail there, go one by one through the solver and its splits. Then the small charts whose
     bisection removes most of their distortion are bisected (``min_split_gain``,
-    :func:`_split_for_gain`).
+    :func:`_split_for_gain`), and last the small charts still over ``slit_above`` are cut along
+    a slit from their strongest cone to their rim when that removes enough of their distortion
+    (:func:`_slit_cones`).
 
     Parameters
     ----------
