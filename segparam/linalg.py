@@ -100,6 +100,11 @@ def spd_solver(A: sp.spmatrix) -> Callable[[np.ndarray], np.ndarray]:
         return _cholmod_solver(A)
     except (ImportError, ArithmeticError) as exc:
         log.debug("no Cholesky factorization (%r); factorizing with SuperLU", exc)
+    return _lu_solver(A)
+
+
+def _lu_solver(A: sp.csc_matrix) -> Callable[[np.ndarray], np.ndarray]:
+    """:func:`spd_solver`'s fallback: SuperLU's LU with a minimum-degree order on ``A + A^T``."""
     lu = spla.splu(
         A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
     )
@@ -118,7 +123,7 @@ def spd_solver_entries(
         return _cholmod_factor(vals[lower], rows[lower], cols[lower], n)
     except (ImportError, ArithmeticError) as exc:
         log.debug("no Cholesky factorization (%r); factorizing with SuperLU", exc)
-    return spd_solver(sp.csc_matrix((vals, (rows, cols)), shape=(n, n)))
+    return _lu_solver(sp.csc_matrix((vals, (rows, cols)), shape=(n, n)))  # not CHOLMOD again
 
 
 def _cholmod_solver(A: sp.csc_matrix) -> Callable[[np.ndarray], np.ndarray]:
