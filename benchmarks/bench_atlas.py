@@ -68,9 +68,11 @@ scan of 166,259 faces in 22 pieces; xatlas takes about two minutes on it); ``--h
 
 For each mesh and tool: wall seconds (the minimum over ``--repeat`` runs), charts, flipped
 triangles, mirrored charts, overlap (texels shared by two charts, ``footprint_conflicts`` at 1024
-with padding 0), utilization (uv triangle area over the unit square; xatlas's uvs are put in the
-square of its atlas' longer side), L2 / Linf stretch and angle distortion
-(``segparam.quality.distortion``), seam (``segparam.quality.seam_length``: total 3-D length of
+with padding 0, on the tool's own texture), utilization (uv triangle area over the unit square:
+the share of the tool's own texture its charts cover; segparam's texture is 1024 x 1024 unless
+trimmed, ``PackConfig.trim``, and xatlas's is its atlas' ``width x height``), L2 / Linf stretch
+and angle distortion (``segparam.quality.distortion`` on the uvs in texels of that texture),
+seam (``segparam.quality.seam_length``: total 3-D length of
 the mesh edges whose two faces have different uv rows, over sqrt of the surface area; the
 mesh's own boundary is not a seam). ``ratio`` is segparam seconds / xatlas seconds. The quality
 figures come from the first run (segparam is seeded and xatlas deterministic: every run gives the
@@ -417,19 +419,34 @@ def measures(
     uv_F: np.ndarray,
     uv_vertex: np.ndarray,
     chart: np.ndarray,
+    texture: tuple[int, int],
 ) -> dict:
-    """All figures of an atlas of the mesh ``(V, F)``: ``uv`` (in [0, 1]^2) row ``k`` belongs to
-    mesh vertex ``uv_vertex[k]``, ``uv_F`` are the faces of ``F`` in uv rows."""
+    """All figures of an atlas of the mesh ``(V, F)``: ``uv`` (in [0, 1]^2, u over the texture's
+    width and v over its height, ``texture = (width, height)`` texels) row ``k`` belongs to mesh
+    vertex ``uv_vertex[k]``, ``uv_F`` are the faces of ``F`` in uv rows."""
     P = V[uv_vertex]
     uvs, faces = per_chart(uv, uv_F, chart)
-    row = {"charts": len(uvs)}
+    row = {"charts": len(uvs), "texture": [int(texture[0]), int(texture[1])]}
     row.update(orientation(uv, uv_F, chart))
-    row["overlap_texels"] = footprint_conflicts(uvs, faces, resolution=RESOLUTION, padding=0)
+    row["overlap_texels"] = footprint_conflicts(uvs, faces, resolution=texture, padding=0)
     row["utilization"] = float(np.abs(signed_areas(uv, uv_F)).sum())
-    d = distortion(P, uv_F, uv)
+    d = distortion(P, uv_F, uv * np.asarray(texture, dtype=np.float64))  # in texels
     row.update({k: d[k] for k in ("l2_stretch", "linf_stretch", "angle_distortion")})
     row["seam"] = seam_length(V, F, uv_F, uv_vertex) / np.sqrt(face_areas(V, F).sum())
     return row
+
+
+def atlas_measures(atlas) -> dict:
+    """:func:`measures` of a segparam ``Atlas`` on its own texture (``packing.size``)."""
+    return measures(
+        atlas.V,
+        atlas.F,
+        atlas.uv,
+        atlas.uv_F,
+        atlas.uv_vertex,
+        atlas.chart_of_face,
+        atlas.packing.size,
+    )
 
 
 # ----------------------------------------------------------------------------------------------
@@ -448,9 +465,7 @@ def run_segparam(V: np.ndarray, F: np.ndarray, mode: str, repeat: int = 1) -> di
             atlas = a
     best = int(np.argmin(seconds))
     row = {"tool": "segparam" if mode == "off" else f"segparam-{mode}", "seconds": seconds[best]}
-    row.update(
-        measures(atlas.V, atlas.F, atlas.uv, atlas.uv_F, atlas.uv_vertex, atlas.chart_of_face)
-    )
+    row.update(atlas_measures(atlas))
     row["faces_out"] = int(len(atlas.uv_F))
     row["stages"] = {k: round(v, 3) for k, v in stages[best].items()}
     row["remeshed"] = bool(atlas.remeshing.remeshed)
@@ -480,9 +495,7 @@ def run_xatlas(V: np.ndarray, F: np.ndarray, repeat: int = 1) -> dict:
     vmap = vmap.astype(np.int64)
     idx = idx.astype(np.int64)
     uv = uv.astype(np.float64)
-    w, h = int(atlas.width), int(atlas.height)
-    side = max(w, h)
-    uv = uv * [w / side, h / side]  # xatlas's uvs are per axis in [0, 1]
+    w, h = int(atlas.width), int(atlas.height)  # xatlas's uvs are per axis in [0, 1]
     chart = np.full(len(idx), -1, dtype=np.int64)
     n_xcharts = atlas.get_mesh_chart_count(0)
     for c in range(n_xcharts):  # loop over charts
@@ -492,7 +505,7 @@ def run_xatlas(V: np.ndarray, F: np.ndarray, repeat: int = 1) -> dict:
         chart = uv_components(idx, len(uv))
         source = "uv components"
     row = {"tool": "xatlas", "seconds": min(seconds)}
-    row.update(measures(V, F, uv, idx, vmap, chart))
+    row.update(measures(V, F, uv, idx, vmap, chart, (w, h)))
     row.update(
         {
             "faces_out": int(len(idx)),

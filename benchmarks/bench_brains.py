@@ -77,7 +77,7 @@ def pipeline_rows(sizes: list[int], seed: int) -> list[dict]:
 
     here = Path(__file__).resolve().parent
     sys.path.insert(0, str(here))
-    from bench_atlas import measures, run_xatlas
+    from bench_atlas import atlas_measures, run_xatlas
 
     rows = []
     for n in sizes:
@@ -89,11 +89,7 @@ def pipeline_rows(sizes: list[int], seed: int) -> list[dict]:
             seconds = time.perf_counter() - t
             report = atlas.report()["atlas"]
             row = {"faces": len(F), "tool": f"segparam ({name})", "seconds": seconds}
-            row.update(
-                measures(
-                    atlas.V, atlas.F, atlas.uv, atlas.uv_F, atlas.uv_vertex, atlas.chart_of_face
-                )
-            )
+            row.update(atlas_measures(atlas))
             row["bijective_charts"] = int(report["bijective_charts"])
             row["faces_out"] = int(len(atlas.uv_F))
             row["stages"] = {k: round(v, 3) for k, v in atlas.timings.items()}

@@ -50,7 +50,7 @@ def run(V: np.ndarray, F: np.ndarray, target: float | None, split: dict, tool="s
     t0 = time.perf_counter()
     a = build_atlas(V, F, cfg, seed=0)
     row = {"tool": tool, "target": target, "seconds": time.perf_counter() - t0}
-    row.update(B.measures(a.V, a.F, a.uv, a.uv_F, a.uv_vertex, a.chart_of_face))
+    row.update(B.atlas_measures(a))
     row["stages"] = {k: round(v, 3) for k, v in a.timings.items()}
     return row
 

@@ -13,9 +13,10 @@ data file (:func:`load_vertex_data`: GIfTI, FreeSurfer morph files, ``.npy``, on
 remeshing, closest-point interpolation with it). :func:`colorize` maps a scalar to colours and
 says which range it used.
 
-Conventions: images are ``(resolution, resolution, ...)`` arrays in picture order, row 0 at the
-top (v = 1), as the PNG files and as OBJ/glTF texture lookups see them: texel ``(i, j)`` has its
-centre at ``u = (j + 1/2) / R``, ``v = 1 - (i + 1/2) / R``.
+Conventions: images are ``(height, width, ...)`` arrays (``width = height = resolution`` unless
+the atlas's texture was trimmed, ``PackResult.size``) in picture order, row 0 at the top (v = 1),
+as the PNG files and as OBJ/glTF texture lookups see them: texel ``(i, j)`` has its centre at
+``u = (j + 1/2) / width``, ``v = 1 - (i + 1/2) / height``.
 """
 
 from __future__ import annotations
@@ -176,7 +177,7 @@ def bake(
     uv: np.ndarray,
     face_uv: np.ndarray,
     values: np.ndarray,
-    resolution: int = 1024,
+    resolution: int | tuple[int, int] = 1024,
     padding: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per-vertex values drawn into the texture of an atlas.
@@ -193,18 +194,18 @@ def bake(
         Rows of ``uv`` at each face corner (``Atlas.uv_F``).
     values : (n,) or (n, C) float ndarray
         One value (or C channels) per mesh vertex.
-    resolution : int
-        Texels per side.
+    resolution : int or (int, int)
+        Texels per side, or the texture's (width, height) (an atlas's ``packing.size``).
     padding : int, optional
         Kept for the API's symmetry with the packer; every texel outside the charts is filled
         by :func:`pull_push` whatever its distance, so the padding is always filled.
 
     Returns
     -------
-    image : (R, R) or (R, R, C) float64 ndarray
+    image : (H, W) or (H, W, C) float64 ndarray
         Picture order (row 0 is v = 1); interpolated values at the texel centres inside a uv
         triangle, pull-push fill elsewhere.
-    covered : (R, R) bool ndarray
+    covered : (H, W) bool ndarray
         Texels whose centre lies in a uv triangle (the others were filled).
     """
     V = np.asarray(V)
@@ -217,14 +218,17 @@ def bake(
         raise BakeError(f"{len(values)} values for {len(V)} vertices")
     if face_uv.shape != F.shape:
         raise BakeError(f"face_uv has shape {face_uv.shape}, F has {F.shape}")
-    R = int(resolution)
-    if R < 1:
-        raise BakeError(f"resolution is {R}; it must be at least 1")
+    from .raster import texture_size
+
+    width, height = texture_size(resolution)
+    if min(width, height) < 1:
+        raise BakeError(f"resolution is {resolution}; it must be at least 1")
     # one row per (face, corner): the values of the mesh vertex at the uv corner
     corner_values = np.ascontiguousarray(W[F.ravel()])
-    P = np.ascontiguousarray(np.asarray(uv, dtype=np.float64)[face_uv.ravel()] * R)
-    out = np.zeros((R, R, W.shape[1]))
-    covered = np.zeros((R, R), dtype=np.bool_)
+    texels = np.array([width, height], dtype=np.float64)
+    P = np.ascontiguousarray(np.asarray(uv, dtype=np.float64)[face_uv.ravel()] * texels)
+    out = np.zeros((height, width, W.shape[1]))
+    covered = np.zeros((height, width), dtype=np.bool_)
     corners = np.arange(3 * len(F), dtype=np.int64).reshape(-1, 3)
     _bake_kernel(P, corners, corner_values, out, covered)
     _pull_push_in_place(out, covered)
@@ -605,14 +609,17 @@ class Baked:
     source: str
 
 
-def bake_named(atlas, name: str, *, input_path=None, resolution: int | None = None) -> Baked:
+def bake_named(
+    atlas, name: str, *, input_path=None, resolution: int | tuple[int, int] | None = None
+) -> Baked:
     """Bake a built-in source (:data:`BAKE_NAMES`) or a per-vertex data file onto an atlas.
 
     ``curvature`` is the mean curvature; ``normals`` object-space normals; ``vertex-colors`` the
     input file's (``input_path``); any other name is a data file whose length must equal the
-    input's vertex count (the cleaning's ``input_vertices``).
+    input's vertex count (the cleaning's ``input_vertices``). The image is the atlas's texture
+    (``packing.size``) unless ``resolution`` says otherwise.
     """
-    R = int(resolution or atlas.packing.resolution)
+    R = resolution or atlas.packing.size
     scalar = None
     scale = None
     if name in ("curvature", "mean-curvature"):

@@ -196,6 +196,8 @@ def _config_from_args(args: argparse.Namespace):
         overrides["pack"]["resolution"] = args.resolution
     if getattr(args, "padding", None) is not None:
         overrides["pack"]["padding"] = args.padding
+    if getattr(args, "square", False):
+        overrides["pack"]["trim"] = False
     if getattr(args, "texels_per_unit", None) is not None:
         overrides["pack"]["texels_per_unit"] = args.texels_per_unit
         if getattr(args, "resolution", None) is None:  # the resolution follows the density
@@ -365,7 +367,8 @@ def _cmd_atlas(args: argparse.Namespace) -> int:
         )
         print(
             f"  bijective charts {a['bijective_charts']}/{a['charts']}  flipped triangles "
-            f"{a['flipped_triangles']}  utilization {a['utilization']:.3f}"
+            f"{a['flipped_triangles']}  utilization {a['utilization']:.3f} of a "
+            f"{a['width']}x{a['height']} texture"
         )
         print(
             f"  angle distortion {a['angle_distortion']:.3f}  L2 stretch {a['l2_stretch']:.3f}  "
@@ -453,8 +456,8 @@ def _atlas_of_several(
     if not args.quiet:
         r = multi.report()["texture"]
         print(
-            f"{r['meshes']} meshes, {r['charts']} charts in one {r['resolution']}x"
-            f"{r['resolution']} texture at {r['texels_per_unit']:.4g} texels per unit, "
+            f"{r['meshes']} meshes, {r['charts']} charts in one {r['width']}x"
+            f"{r['height']} texture at {r['texels_per_unit']:.4g} texels per unit, "
             f"utilization {r['utilization']:.3f}"
         )
         inputs = [str(s) for s, group in zip(sources, loaded, strict=True) for _ in group]
@@ -578,8 +581,12 @@ def add_pipeline_options(p: argparse.ArgumentParser) -> None:
     """The options shared by ``atlas`` and ``batch`` (read back by :func:`_config_from_args`)."""
     p.add_argument("--config", help="pipeline TOML file, or a bundled name: default, brain, fast")
     p.add_argument(
-        "--resolution", type=RESOLUTION, help="texture size in texels, 1 to 16384 (default 1024)"
+        "--resolution",
+        type=RESOLUTION,
+        help="texture size in texels, 1 to 16384 (default 1024); the texture is cut to the "
+        "rows or columns the charts use when 1/8 or more of its side would be empty",
     )
+    p.add_argument("--square", action="store_true", help="always a square texture (no trimming)")
     p.add_argument("--padding", type=PADDING, help="texels between charts and at the border (2)")
     p.add_argument(
         "--texels-per-unit",

@@ -155,7 +155,7 @@ def render_uv_layout(
     F: np.ndarray,
     *,
     labels: np.ndarray | None = None,
-    size: int = 1024,
+    size: int | tuple[int, int] = 1024,
     outline: bool = True,
 ):
     """Picture of a uv layout in the unit square: charts filled in distinct colours, outlined.
@@ -171,6 +171,9 @@ def render_uv_layout(
         Triangles into ``uv``.
     labels : (m,) int ndarray, optional
         Chart of each face (default: one chart).
+    size : int or (int, int)
+        Pixels per side, or the picture's (width, height): an atlas's ``packing.size``, the
+        texture's texels.
 
     Returns
     -------
@@ -179,20 +182,22 @@ def render_uv_layout(
     from PIL import Image, ImageDraw
 
     from .mesh import boundary_loops, group_by_label
-    from .raster import rasterize_triangles
+    from .raster import rasterize_triangles, texture_size
 
+    width, height = texture_size(size)
+    wh = np.array([width, height], dtype=np.float64)
     labels = np.zeros(len(F), dtype=np.int64) if labels is None else np.asarray(labels)
     n = int(labels.max()) + 1
     # colour of each chart's number + 1; 0 (no chart) is white
     lut = np.vstack([[255, 255, 255], _palette(n)]).astype(np.uint8)
-    chart = np.zeros((size, size), dtype=np.uint8 if n < 255 else np.int64)
+    chart = np.zeros((height, width), dtype=np.uint8 if n < 255 else np.int64)
     order, bounds = group_by_label(labels, n)
     groups = [order[bounds[k] : bounds[k + 1]] for k in range(n)]
-    P = np.asarray(uv, dtype=np.float64) * size
+    P = np.asarray(uv, dtype=np.float64) * wh
     for k, faces in enumerate(groups):  # loop over charts
         if len(faces) == 0:
             continue
-        rows, cols = _texel_box(P[F[faces].ravel()], size)  # the chart's texels all lie in it
+        rows, cols = _texel_box(P[F[faces].ravel()], (width, height))  # the chart's texels
         corner = np.array([cols.start, rows.start], dtype=np.float64)  # exact: 0 <= it <= P
         shape = (rows.stop - rows.start, cols.stop - cols.start)
         mask = rasterize_triangles(P - corner, F[faces], shape, 0.0)
@@ -200,8 +205,8 @@ def render_uv_layout(
     image = Image.fromarray(lut.take(chart[::-1], axis=0))  # row 0 is v = 0: flip, v grows up
     if outline:
         draw = ImageDraw.Draw(image)
-        P = uv * size
-        P[:, 1] = size - P[:, 1]
+        P = uv * wh
+        P[:, 1] = height - P[:, 1]
         # the loops of all charts at once: one colour, so the order they are drawn in is moot
         for loop in boundary_loops(np.asarray(F)):  # loop over boundary loops
             pts = P[np.r_[loop, loop[:1]]]
@@ -209,38 +214,57 @@ def render_uv_layout(
     return image
 
 
-def _texel_box(Q: np.ndarray, size: int) -> tuple[slice, slice]:
-    """Rows and columns of a ``size`` grid that hold every texel a conservative rasterization of
-    points ``Q`` (texel units) can touch: their bounding box and one texel around it."""
+def _texel_box(Q: np.ndarray, size: tuple[int, int]) -> tuple[slice, slice]:
+    """Rows and columns of a ``(width, height)`` grid that hold every texel a conservative
+    rasterization of points ``Q`` (texel units) can touch: their bounding box and one texel
+    around it."""
+    width, height = size
     lo, hi = Q.min(axis=0), Q.max(axis=0)
     if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
-        return slice(0, size), slice(0, size)
-    c0, r0 = np.clip(np.floor(lo) - 1, 0, size).astype(np.int64)
-    c1, r1 = np.clip(np.floor(hi) + 2, 0, size).astype(np.int64)
+        return slice(0, height), slice(0, width)
+    c0, r0 = np.clip(np.floor(lo) - 1, 0, [width, height]).astype(np.int64)
+    c1, r1 = np.clip(np.floor(hi) + 2, 0, [width, height]).astype(np.int64)
     return slice(int(r0), int(r1)), slice(int(c0), int(c1))
 
 
-def checker_image(size: int = 1024, squares: int = 16):
-    """A checkerboard texture with a colour ramp (so flips and rotations show), PIL image."""
+#: The checker texture's pixels along u (its squares: ``CHECKER_SIZE / CHECKER_SQUARES`` each).
+CHECKER_SIZE = 1024
+CHECKER_SQUARES = 16
+
+
+def checker_size(texture: tuple[int, int]) -> tuple[int, int]:
+    """The checker texture's (width, height) for an atlas texture of ``(width, height)``
+    texels: `CHECKER_SIZE` wide, as tall as keeps its squares square on the atlas."""
+    width, height = texture
+    return CHECKER_SIZE, max(1, int(round(CHECKER_SIZE * height / width)))
+
+
+def checker_image(size: int | tuple[int, int] = 1024, squares: int = 16):
+    """A checkerboard texture with a colour ramp (so flips and rotations show), PIL image;
+    ``size`` is its side or its (width, height), and ``squares`` how many squares span its
+    width."""
     from PIL import Image
 
     return Image.fromarray(_checker_pixels(size, squares))
 
 
-def _checker_pixels(size: int, squares: int) -> np.ndarray:
-    """The pixels of :func:`checker_image`, (size, size, 3) uint8.
+def _checker_pixels(size: int | tuple[int, int], squares: int) -> np.ndarray:
+    """The pixels of :func:`checker_image`, (height, width, 3) uint8.
 
     Red ramps along the columns, green down the rows, blue is constant, and dark squares take
     35% of each: every channel is a lookup by row or by column, broadcast over the image.
     """
-    a = np.arange(size)
-    cell = size // squares
-    parity = (a // cell) % 2 == 1
-    dark = parity[:, None] != parity[None, :]  # (i // cell + j // cell) is odd
-    red = (80 + 150 * a / size).astype(np.uint8)  # by column
-    green = (80 + 150 * (1 - a / size)).astype(np.uint8)  # by row
+    from .raster import texture_size
+
+    width, height = texture_size(size)
+    a, b = np.arange(width), np.arange(height)
+    cell = max(1, width // squares)
+    col_parity, row_parity = (a // cell) % 2 == 1, (b // cell) % 2 == 1
+    dark = row_parity[:, None] != col_parity[None, :]  # (i // cell + j // cell) is odd
+    red = (80 + 150 * a / width).astype(np.uint8)  # by column
+    green = (80 + 150 * (1 - b / height)).astype(np.uint8)  # by row
     blue = np.full(1, 200, dtype=np.uint8)
-    img = np.empty((size, size, 3), dtype=np.uint8)
+    img = np.empty((height, width, 3), dtype=np.uint8)
     img[..., 0] = np.where(dark, (red * 0.35).astype(np.uint8), red)
     img[..., 1] = np.where(dark, (green * 0.35).astype(np.uint8)[:, None], green[:, None])
     img[..., 2] = np.where(dark, (blue * 0.35).astype(np.uint8), blue)
@@ -248,7 +272,7 @@ def _checker_pixels(size: int, squares: int) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=4)
-def _checker_png(size: int = 1024, squares: int = 16) -> bytes:
+def _checker_png(size: tuple[int, int] = (CHECKER_SIZE, CHECKER_SIZE), squares: int = 16) -> bytes:
     """:func:`checker_image` as PNG bytes, made once per size (the atlas writes it twice: the
     ``_checker.png`` file and the texture inside the GLB)."""
     return _png_bytes(_checker_pixels(size, squares))
@@ -269,10 +293,12 @@ def _png_bytes(pixels: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def _write_material(stage: Path, mtl_name: str, checker_name: str) -> bytes:
-    """The checker texture and the MTL file that maps it; returns the PNG bytes (the GLB embeds
-    them too)."""
-    checker = _checker_png(1024)
+def _write_material(
+    stage: Path, mtl_name: str, checker_name: str, texture: tuple[int, int]
+) -> bytes:
+    """The checker texture (for an atlas texture of ``(width, height)`` texels) and the MTL
+    file that maps it; returns the PNG bytes (the GLB embeds them too)."""
+    checker = _checker_png(checker_size(texture))
     (stage / checker_name).write_bytes(checker)
     (stage / mtl_name).write_text(
         f"# written by segparam\nnewmtl atlas\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\n"
@@ -346,7 +372,7 @@ def save_atlas(
     pictures = PictureOptions() if pictures is None else pictures
     names = atlas_file_names(stem, pictures)
     check_output_folder(outdir, names.values())
-    size = size or atlas.packing.resolution
+    size = _picture_size(size, atlas.packing)
     try:
         # the pictures are made before anything is written: a failure leaves no file
         uv_png, extra, pictures_info, seconds = _picture_files(atlas, stem, pictures, size)
@@ -354,7 +380,7 @@ def save_atlas(
         report["timings"] = {**report.get("timings", {}), **seconds}
         report["pictures"] = pictures_info
         with staged_outputs(outdir) as stage:
-            checker = _write_material(stage, names["mtl"], names["checker"])
+            checker = _write_material(stage, names["mtl"], names["checker"], atlas.packing.size)
             _write_mesh(stage, atlas, names["obj"], names["glb"], names["mtl"], checker)
             _write_tail(stage, names["uv"], uv_png, extra, names["report"], report)
     except MeshFileError:
@@ -364,7 +390,16 @@ def save_atlas(
     return [outdir / name for name in names.values()]
 
 
-def _picture_files(atlas, stem: str, pictures, size: int):
+def _picture_size(size: int | None, packing) -> tuple[int, int]:
+    """The uv picture's (width, height): the texture's (``packing.size``), or ``size`` pixels
+    wide at the texture's aspect."""
+    width, height = packing.size
+    if not size:
+        return width, height
+    return int(size), max(1, int(round(size * height / width)))
+
+
+def _picture_files(atlas, stem: str, pictures, size: tuple[int, int]):
     """The uv-layout PNG and the pictures of ``pictures`` for ``atlas`` (an :class:`Atlas` or
     the :class:`~segparam.pictures.MeshSet` of several): ``(uv png bytes, {file name: bytes},
     the report's pictures section, {"picture <name>": seconds})``. One function for
@@ -373,9 +408,8 @@ def _picture_files(atlas, stem: str, pictures, size: int):
 
     layout = render_uv_layout(atlas.uv, atlas.uv_F, labels=atlas.chart_of_face, size=size)
     uv_png = _png_bytes(np.asarray(layout))
-    extra, info = make_pictures(
-        atlas, stem, pictures, checker_png=_checker_png(1024), uv_png=uv_png
-    )
+    checker = _checker_png(checker_size(atlas.packing.size))
+    extra, info = make_pictures(atlas, stem, pictures, checker_png=checker, uv_png=uv_png)
     seconds = {f"picture {k}": v for k, v in info.pop("seconds").items()}
     return uv_png, extra, info, seconds
 
@@ -422,13 +456,13 @@ def save_atlases(
         # the pictures of the whole set, from the code of one atlas, before anything is written
         merged = merge_atlases(atlases, multi.packing)
         uv_png, extra, pictures_info, seconds = _picture_files(
-            merged, shared_stem, pictures, multi.packing.resolution
+            merged, shared_stem, pictures, multi.packing.size
         )
         report = multi.report()
         report["pictures"] = pictures_info
         report["timings"] = seconds
         with staged_outputs(outdir) as stage:
-            checker = _write_material(stage, names["mtl"], names["checker"])
+            checker = _write_material(stage, names["mtl"], names["checker"], multi.packing.size)
             for atlas, files_of in zip(atlases, names["meshes"], strict=True):  # per mesh
                 glb = files_of.get("glb")
                 _write_mesh(stage, atlas, files_of["obj"], glb, names["mtl"], checker)

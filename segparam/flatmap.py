@@ -135,7 +135,7 @@ def render_flatmap(
     face_uv: np.ndarray,
     values: np.ndarray | None = None,
     *,
-    resolution: int = 1024,
+    resolution: int | tuple[int, int] = 1024,
     curvature: np.ndarray | None = None,
     vrange: tuple[float, float] | None = None,
     cmap: str | None = None,
@@ -153,8 +153,8 @@ def render_flatmap(
 
     Returns
     -------
-    rgb : (R, R, 3) uint8 ndarray
-        Picture order; white outside the charts.
+    rgb : (H, W, 3) uint8 ndarray
+        Picture order (``resolution``: a side or a (width, height)); white outside the charts.
     scale : dict or None
         The data's colour map and range (None without values).
     """

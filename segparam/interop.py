@@ -32,9 +32,6 @@ __all__ = ["atlas_to_trimesh", "parametrize", "unwrap", "xatlas_arrays"]
 #: the faces it cannot chart, so that code checking ``uvs`` in the unit square still holds.
 DROPPED_UV = (0.0, 0.0)
 
-#: Side of the checker texture of :func:`atlas_to_trimesh` (the one the OBJ/GLB outputs use).
-CHECKER_SIZE = 1024
-
 
 def _keep_vertices(config: PipelineConfig | None) -> PipelineConfig:
     """``config`` with remeshing off: the atlas must be on the caller's own vertices."""
@@ -191,9 +188,9 @@ def atlas_to_trimesh(atlas: Atlas, image: Any = None) -> trimesh.Trimesh:
     import trimesh
     from trimesh.visual import TextureVisuals
 
-    from .export import checker_image
+    from .export import checker_image, checker_size
 
-    texture = checker_image(CHECKER_SIZE) if image is None else image
+    texture = checker_image(checker_size(atlas.packing.size)) if image is None else image
     return trimesh.Trimesh(
         vertices=atlas.V[atlas.uv_vertex],
         faces=atlas.uv_F,

@@ -8,7 +8,10 @@ This stage
 3. places all charts in the texture square, turned by quarter turns of that frame or (charts
    that are not rectangles) by finer steps, never mirrored, so that the charts' texel footprints
    are `padding` empty texels apart from each other and from the border;
-4. maximizes the one global scale for which that placement exists, and reports the utilization.
+4. maximizes the one global scale for which that placement exists, and reports the utilization;
+5. cuts the texture to the rows (columns) the layout uses where an eighth of its side or more
+   would be empty (``trim``; the uvs are then u over the width, v over the height: a long
+   sheet gets a 1024 x 572 texture it fills, not a square it half fills).
 
 Two methods:
 
@@ -212,6 +215,12 @@ class PackConfig:
         atlas's density is scaled down to this many texels (it alone gets fewer texels per
         unit). 0 (default): no limit. With ``texels_per_unit = 0`` the density is first found
         without the limit, then the charts above it are scaled down at that density.
+    trim : bool
+        Cut the texture to the rows (columns) the layout uses when at least `TRIM_LEAST` of its
+        side would be empty, rounded up to a multiple of `TRIM_MULTIPLE` texels (default True):
+        a long chart (a sheet, a pipe's side) then gets a 1024 x 576 texture rather than a
+        square it fills half of; the layout and the texel density are the same either way.
+        False: always the square.
 
     Raises
     ------
@@ -226,6 +235,7 @@ class PackConfig:
     angle_steps: int = 6
     texels_per_unit: float = 0.0
     max_chart_size: int = 0
+    trim: bool = True
 
     def __post_init__(self) -> None:
         # the same checks (and messages) as every stage's config; stored as plain Python values
@@ -251,6 +261,7 @@ class PackConfig:
         object.__setattr__(self, "padding", check_int("padding", self.padding, low=0))
         object.__setattr__(self, "angle_steps", check_int("angle_steps", self.angle_steps, low=1))
         object.__setattr__(self, "rotate", check_bool("rotate", self.rotate))
+        object.__setattr__(self, "trim", check_bool("trim", self.trim))
         check_choice("method", self.method, _METHODS)
         if not follows and self.resolution <= 2 * self.padding:
             raise ConfigError(
@@ -266,20 +277,25 @@ class PackResult:
     Attributes
     ----------
     uvs : tuple of (n_i, 2) float ndarray
-        Per chart, the packed uv coordinates, inside ``[padding, resolution - padding] /
-        resolution`` on both axes.
+        Per chart, the packed uv coordinates, inside ``[padding, width - padding] / width`` in
+        u and ``[padding, height - padding] / height`` in v.
     scale : float
-        The global factor from 3-D length to uv length: every chart's uv area is
-        ``scale**2`` times its 3-D area.
+        The global factor from 3-D length to uv length along u, ``texels per unit / width``
+        (along v it is ``texels per unit / height``): in texels, every chart's area is
+        ``(scale * width)**2`` times its 3-D area.
     transforms : (n_charts, 2, 3) float ndarray
-        Per chart the affine map ``uv_out = A[:, :2] @ uv_in + A[:, 2]``; a rotation times a
-        uniform scale (never a mirror).
+        Per chart the affine map ``uv_out = A[:, :2] @ uv_in + A[:, 2]``: a rotation times a
+        uniform scale (never a mirror), then u divided by `width` and v by `height`.
     utilization : float
-        Total uv triangle area over the area of the unit square.
+        Total uv triangle area over the area of the unit square: the share of the texture's
+        texels (``width x height``) the charts cover.
     resolution : int
-        Texels per side the layout was packed for.
+        Texels per side of the square the layout was packed for.
     padding : int
         Padding in texels the layout respects at that resolution.
+    width, height : int
+        The texture's size in texels: ``resolution`` each, or less where the layout was trimmed
+        (``PackConfig.trim``). A uv ``(u, v)`` is the texel point ``(u * width, v * height)``.
     """
 
     uvs: tuple[np.ndarray, ...]
@@ -288,6 +304,20 @@ class PackResult:
     utilization: float
     resolution: int
     padding: int
+    width: int = 0
+    height: int = 0
+
+    def __post_init__(self) -> None:
+        # an unset size is the square the layout was packed for
+        if self.width == 0:
+            object.__setattr__(self, "width", self.resolution)
+        if self.height == 0:
+            object.__setattr__(self, "height", self.resolution)
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """The texture's ``(width, height)`` in texels."""
+        return (self.width, self.height)
 
 
 @dataclass(frozen=True)
@@ -1041,7 +1071,7 @@ def _pack_at_density(
                 )
             placed = _one_trial(charts, s, G, p, cfg)
             if placed is not None:
-                return _finish(charts, placed, s, G, p, k + 1, cfg.method)
+                return _finish(charts, placed, s, G, p, k + 1, cfg)
         raise SolverError(
             f"{len(charts)} charts do not fit a {G}x{G} texture with padding {p} at "
             f"{s:.6g} texels per unit length; lower the texel density or raise the resolution"
@@ -1057,7 +1087,7 @@ def _pack_at_density(
             [trial(charts, order, s, G, p, turns, r, oriented) for r in rules], G
         )
         if placed is not None:
-            return _finish(charts, placed, s, G, p, n_trials, cfg.method)
+            return _finish(charts, placed, s, G, p, n_trials, cfg)
         grown = int(np.ceil(G * _GROW))
         if need is not None:  # a square as tall as the trial needed, in area
             grown = max(grown, int(np.ceil(np.sqrt((G - 2 * p) * (need - 2 * p)))) + 2 * p)
@@ -1145,7 +1175,7 @@ def pack_charts(
             f"{len(charts)} charts do not fit a {G}x{G} texture with padding {p} at any scale "
             f"down to {s:.3g} texels per unit length"
         )
-    return _finish(charts, best, lo, G, p, n_trials, cfg.method)
+    return _finish(charts, best, lo, G, p, n_trials, cfg)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -1234,35 +1264,72 @@ def _finish(
     G: int,
     p: int,
     n_trials: int,
-    method: str,
+    cfg: PackConfig,
 ) -> PackResult:
     to_tex, row, col = placed
     M = to_tex @ np.stack([ch.to_q for ch in charts])
     M[:, :2, 2] += np.column_stack([col, row])
+    texel = M[:, :2].copy()  # chart uv -> texels
     M[:, :2] /= G
     transforms = np.empty((len(charts), 2, 3))
     transforms[[ch.index for ch in charts]] = M[:, :2]
     # loop over charts: one small product each (the same arithmetic, bit for bit, as ever)
     out_uvs = [ch.uv @ m[:2, :2].T + m[:2, 2] for ch, m in zip(charts, M, strict=True)]
+    U = np.concatenate(out_uvs)
+    width, height = _trimmed(U.max(axis=0) * G, G, p) if cfg.trim else (G, G)
+    if (width, height) != (G, G):  # the same layout, u over the width and v over the height
+        M[:, :2] = texel / np.array([width, height], dtype=np.float64)[None, :, None]
+        transforms[[ch.index for ch in charts]] = M[:, :2]
+        out_uvs = [ch.uv @ m[:2, :2].T + m[:2, 2] for ch, m in zip(charts, M, strict=True)]
+        U = np.concatenate(out_uvs)
     nv = np.array([len(ch.uv) for ch in charts])
     offset = np.repeat(np.r_[0, np.cumsum(nv)[:-1]], [len(ch.F) for ch in charts])
     faces = np.concatenate([ch.F for ch in charts]) + offset[:, None]
-    area = float(np.abs(signed_areas(np.concatenate(out_uvs), faces)).sum())
+    area = float(np.abs(signed_areas(U, faces)).sum())
     logger.info(
         "packed %d charts (%s) at %dx%d, padding %d: utilization %.4f after %d trials",
         len(charts),
-        method,
-        G,
-        G,
+        cfg.method,
+        width,
+        height,
         p,
         area,
         n_trials,
     )
     return PackResult(
         uvs=tuple(out_uvs),
-        scale=s / G,
+        scale=s / width,
         transforms=transforms,
         utilization=area,
         resolution=G,
         padding=p,
+        width=width,
+        height=height,
     )
+
+
+#: ``PackConfig.trim``: a side of the texture is cut to what the layout uses only where at least
+#: this share of it would be empty. Most layouts fill their square (the scale search grows them
+#: until the next trial no longer fits: the 17 meshes of ``bench_atlas.py --quick`` leave 0-3% of
+#: the height empty), so they keep the size the user asked for; a layout bound by one long chart
+#: (the 3k sheet 44%, the capped cylinder 20% of the height) gets a rectangle that it fills.
+TRIM_LEAST = 0.125
+#: A trimmed side is rounded up to a multiple of this many texels: GPU texture compression works
+#: on 4 x 4 blocks (BCn, ETC2, ASTC 4x4), and a side that is not a multiple of 4 cannot take it.
+TRIM_MULTIPLE = 4
+
+
+def _trimmed(top: np.ndarray, G: int, p: int) -> tuple[int, int]:
+    """The texture's (width, height) for a layout on a ``G`` square whose footprints reach
+    ``top`` (the largest x and y of its charts, in texels): each side is the last texel a
+    footprint touches, plus 1, plus the padding, rounded up to `TRIM_MULTIPLE`, where that
+    leaves at least `TRIM_LEAST` of `G` empty; `G` otherwise.
+
+    A closed triangle touches texel row ``floor(y)`` at its top ``y`` (and row ``y`` itself when
+    ``y`` is an integer), so ``floor(y) + 1 + p`` rows keep the padding to the new border; the
+    tolerance covers the rounding of the affine maps' products.
+    """
+    need = np.floor(np.asarray(top) + 1e-6).astype(np.int64) + 1 + p
+    side = -(-need // TRIM_MULTIPLE) * TRIM_MULTIPLE
+    cut = side <= G * (1 - TRIM_LEAST)
+    return int(side[0]) if cut[0] else G, int(side[1]) if cut[1] else G

@@ -182,10 +182,10 @@ def make_pictures(
     info: dict[str, Any] = {"seconds": seconds}
     checker = None
     if options.preview:
-        from .export import _checker_pixels
+        from .export import CHECKER_SQUARES, _checker_pixels, checker_size
 
         t = time.perf_counter()
-        checker = _checker_pixels(1024, 16)
+        checker = _checker_pixels(checker_size(atlas.packing.size), CHECKER_SQUARES)
         files[names["preview"]] = _png(
             render_preview(atlas.V, atlas.F, atlas.uv, atlas.uv_F, checker)
         )
@@ -207,7 +207,10 @@ def make_pictures(
         for b in baked:
             if b.scalar is not None:
                 data[b.name] = b.scalar[atlas.uv_vertex]
-        img = flat_gifti(atlas.uv, atlas.uv_F, data, vertex_of_uv=atlas.uv_vertex)
+        # the flat surface in the texture's proportions (u over [0, 1], v over height / width)
+        width, height = atlas.packing.size
+        flat_uv = atlas.uv * np.array([1.0, height / width])
+        img = flat_gifti(flat_uv, atlas.uv_F, data, vertex_of_uv=atlas.uv_vertex)
         files[names["flat"]] = img.to_xml()
         files[names["flat_data"]] = data_gifti(data).to_xml()
         # the first baked scalar other than curvature over the curvature shading (else none)
@@ -218,7 +221,7 @@ def make_pictures(
             atlas.uv,
             atlas.uv_F,
             None if shown is None else shown.scalar,
-            resolution=atlas.packing.resolution,
+            resolution=atlas.packing.size,
             curvature=curvature,
         )
         files[names["flatmap"]] = _png(rgb)

@@ -236,7 +236,9 @@ class Atlas:
         Positions of the mesh that was charted (cleaned; remeshed if the remesh stage ran).
     F : (m, 3) int64 ndarray
     uv : (k, 2) float64 ndarray
-        Atlas coordinates in ``[0, 1]^2``, split along seams (one row per chart vertex).
+        Atlas coordinates in ``[0, 1]^2``, split along seams (one row per chart vertex). The
+        texture is ``packing.width x packing.height`` texels (a square unless trimmed): a uv
+        ``(u, v)`` is the texel point ``(u * width, v * height)`` (:attr:`texel_uv`).
     uv_F : (m, 3) int64 ndarray
         Rows of ``uv`` for each face corner.
     uv_vertex : (k,) int64 ndarray
@@ -270,6 +272,13 @@ class Atlas:
     @property
     def n_charts(self) -> int:
         return len(self.charts.charts)
+
+    @property
+    def texel_uv(self) -> np.ndarray:
+        """``uv`` in texels of the ``packing.width x packing.height`` texture: where the
+        texture is not square, the coordinates in which lengths and angles are the texture's
+        (distortion is measured on these)."""
+        return self.uv * np.array(self.packing.size, dtype=np.float64)
 
     def seam_length(self) -> float:
         """Total 3-D length of the seams (edges whose two faces have different uv rows)."""
@@ -323,6 +332,11 @@ def _versions() -> dict[str, str]:
 def _cut_untried(charts: ChartSet) -> int | None:
     """How many segmentation charts the split stage cut before any solve (None: not recorded)."""
     return None if charts.cut_untried is None else int(charts.cut_untried.sum())
+
+
+def _texel_aspect(packing: PackResult) -> np.ndarray:
+    """``[1, height / width]``: uv times this has texels of one size along u and v."""
+    return np.array([1.0, packing.height / packing.width])
 
 
 def build_report(atlas: Atlas) -> dict[str, Any]:
@@ -393,10 +407,14 @@ def build_report(atlas: Atlas) -> dict[str, Any]:
             "charts_cut_open": int(sum(r["cut_vertices"] > 0 for r in charts)),
             "utilization": atlas.packing.utilization,
             "resolution": atlas.packing.resolution,
+            "width": atlas.packing.width,
+            "height": atlas.packing.height,
             "padding": atlas.packing.padding,
-            "texels_per_unit": atlas.packing.scale * atlas.packing.resolution,
+            "texels_per_unit": atlas.packing.scale * atlas.packing.width,
             "seam_length_over_sqrt_area": atlas.seam_length() / np.sqrt(total_area),
-            **distortion(V[atlas.uv_vertex], atlas.uv_F, atlas.uv),
+            # on uv with texels of one size in u and v (v stretched by height / width; the same
+            # numbers as texels, which the distortion's scale does not change)
+            **distortion(V[atlas.uv_vertex], atlas.uv_F, atlas.uv * _texel_aspect(atlas.packing)),
         },
         "charts": charts,
     }
@@ -489,9 +507,11 @@ class MultiAtlas:
                     "meshes": len(self.atlases),
                     "charts": len(packing.uvs),
                     "resolution": packing.resolution,
+                    "width": packing.width,
+                    "height": packing.height,
                     "padding": packing.padding,
                     "utilization": packing.utilization,
-                    "texels_per_unit": packing.scale * packing.resolution,
+                    "texels_per_unit": packing.scale * packing.width,
                 },
                 "meshes": [
                     {"name": name, **atlas.report()}

@@ -6,9 +6,9 @@ machine code is kept beside this file after the first run), because the packer r
 chart in up to 24 orientations for every scale it tries, and the per-row work of a triangle is
 a few comparisons that numpy could only batch at the price of large temporary arrays.
 
-Conventions: a texel ``(i, j)`` of a ``resolution x resolution`` texture covers
-``[j, j + 1] x [i, i + 1] / resolution`` in uv, i.e. grids are indexed ``[row = v, col = u]``
-with row 0 at v = 0.
+Conventions: a texel ``(i, j)`` of a ``width x height`` texture (``resolution x resolution``
+unless trimmed, see ``PackConfig.trim``) covers ``[j, j + 1] / width x [i, i + 1] / height`` in
+uv, i.e. grids are indexed ``[row = v, col = u]`` with row 0 at v = 0.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ __all__ = [
     "footprint_conflicts",
     "rasterize_footprint",
     "rasterize_triangles",
+    "texture_size",
 ]
 
 # Tolerance (texels) of the public rasterizer: anything within it of a texel touches the texel.
@@ -308,10 +309,19 @@ def dilate(mask: np.ndarray, radius: int) -> np.ndarray:
     return dilate_kernel(np.ascontiguousarray(mask, dtype=np.bool_), int(radius))
 
 
+def texture_size(resolution: int | tuple[int, int]) -> tuple[int, int]:
+    """A texture's ``(width, height)`` in texels from a side (a square) or a pair."""
+    if np.ndim(resolution) == 0:
+        return int(resolution), int(resolution)
+    width, height = resolution
+    return int(width), int(height)
+
+
 def rasterize_footprint(
-    uv: np.ndarray, F: np.ndarray, *, resolution: int, eps: float = CHECK_EPS
+    uv: np.ndarray, F: np.ndarray, *, resolution: int | tuple[int, int], eps: float = CHECK_EPS
 ) -> np.ndarray:
-    """Conservative footprint of one chart on a ``resolution x resolution`` texture.
+    """Conservative footprint of one chart on a ``resolution x resolution`` texture (or a
+    ``width x height`` one: ``resolution=(width, height)``).
 
     Parameters
     ----------
@@ -319,27 +329,28 @@ def rasterize_footprint(
         Chart coordinates in the unit square (parts outside are clipped).
     F : (m, 3) int ndarray
         Triangles, indices into `uv`.
-    resolution : int
-        Texels per side.
+    resolution : int or (int, int)
+        Texels per side, or the texture's (width, height).
     eps : float
         Tolerance in texels: a texel closer than `eps` to a triangle counts as touched.
 
     Returns
     -------
-    mask : (resolution, resolution) bool ndarray
-        ``mask[i, j]`` is True when a triangle touches texel ``[j, j+1] x [i, i+1] /
-        resolution`` (row index along v).
+    mask : (height, width) bool ndarray
+        ``mask[i, j]`` is True when a triangle touches texel ``[j, j+1] / width x [i, i+1] /
+        height`` (row index along v).
     """
+    W, H = texture_size(resolution)
     uv = np.asarray(uv, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
-    return rasterize_triangles(uv * resolution, F, (resolution, resolution), eps)
+    return rasterize_triangles(uv * np.array([W, H], dtype=np.float64), F, (H, W), eps)
 
 
 def footprint_conflicts(
     uvs: Sequence[np.ndarray],
     faces: Sequence[np.ndarray],
     *,
-    resolution: int,
+    resolution: int | tuple[int, int],
     padding: int = 0,
 ) -> int:
     """Count the texels that break the padding rule of a packed atlas.
@@ -355,8 +366,8 @@ def footprint_conflicts(
         Chart coordinates, meant to lie in the unit square.
     faces : sequence of (m_i, 3) int ndarray
         Chart triangles.
-    resolution : int
-        Texels per side.
+    resolution : int or (int, int)
+        Texels per side, or the texture's (width, height) (``PackResult.size``).
     padding : int
         Empty texels required between charts and to the border.
 
@@ -365,11 +376,13 @@ def footprint_conflicts(
     int
         Number of offending (chart, texel) pairs; 0 for a valid layout.
     """
-    G, p = int(resolution), int(padding)
+    W, H = texture_size(resolution)
+    p = int(padding)
+    G = np.array([W, H], dtype=np.float64)
     # a canvas with a margin, so that footprints past the border are still seen
     m = p + 2
-    size = G + 2 * m
-    count = np.zeros((size, size), dtype=np.int32)
+    size = (H + 2 * m, W + 2 * m)
+    count = np.zeros(size, dtype=np.int32)
     windows = []
     bad = 0
     for uv, F in zip(uvs, faces, strict=True):  # loop over charts
@@ -387,11 +400,11 @@ def footprint_conflicts(
         grown = dilate(mask, p)
         r0, c0 = int(lo[1]) + m - p, int(lo[0]) + m - p
         r0c, c0c = max(r0, 0), max(c0, 0)
-        r1c, c1c = min(r0 + grown.shape[0], size), min(c0 + grown.shape[1], size)
+        r1c, c1c = min(r0 + grown.shape[0], size[0]), min(c0 + grown.shape[1], size[1])
         count[r0c:r1c, c0c:c1c] += grown[r0c - r0 : r1c - r0, c0c - c0 : c1c - c0]
         windows.append((mask, grown, r0, c0))
-    allowed = np.zeros((size, size), dtype=bool)
-    allowed[m + p : m + G - p, m + p : m + G - p] = True
+    allowed = np.zeros(size, dtype=bool)
+    allowed[m + p : m + H - p, m + p : m + W - p] = True
     for w in windows:
         if w is None:
             continue

@@ -137,8 +137,10 @@ class RepackResult:
             "charts": int(len(self.packing.uvs)),
             "utilization": self.packing.utilization,
             "resolution": self.packing.resolution,
+            "width": self.packing.width,
+            "height": self.packing.height,
             "padding": self.packing.padding,
-            "texels_per_unit": self.packing.scale * self.packing.resolution,
+            "texels_per_unit": self.packing.scale * self.packing.width,
         }
 
     def save(self, outdir: Any, *, stem: str = "mesh") -> list:

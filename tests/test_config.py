@@ -74,6 +74,7 @@ BAD = {
     ("pack", "padding"): ([2.0, True, "2"], [-1]),
     ("pack", "method"): ([1, True], ["skyline", "Raster"]),
     ("pack", "rotate"): ([1, 0, "yes", 1.0], ["true", "false"]),
+    ("pack", "trim"): ([1, 0, "no", 1.0], ["true", "false"]),
     ("pack", "angle_steps"): ([6.0, True], [0, -6]),
     ("pack", "texels_per_unit"): (["64", True], [-1, math.inf, math.nan]),
     ("pack", "max_chart_size"): ([1.5, True, "8"], [-1]),

@@ -28,19 +28,21 @@ def _charts():
     return uvs, [F] * 4, areas
 
 
+def _texels(result):
+    """Per chart, its packed uv in texels of the (possibly trimmed) texture."""
+    return [u * np.array(result.size, dtype=float) for u in result.uvs]
+
+
 def _density(result, faces, areas):
-    """Per chart, texels per unit length: sqrt(uv area in texels / 3-D area)."""
-    G = result.resolution
-    pairs = zip(result.uvs, faces, strict=True)
-    uv_area = np.array([np.abs(signed_areas(u, f)).sum() for u, f in pairs])
-    return np.sqrt(uv_area * G * G / np.asarray(areas))
+    """Per chart, texels per unit length: sqrt(area in texels / 3-D area)."""
+    pairs = zip(_texels(result), faces, strict=True)
+    texel_area = np.array([np.abs(signed_areas(u, f)).sum() for u, f in pairs])
+    return np.sqrt(texel_area / np.asarray(areas))
 
 
 def _longest_side(result):
     """Per chart, the longer side of its minimum-area box, in texels."""
-    return np.array(
-        [np.ptp(min_area_rotation(u)[0], axis=0).max() * result.resolution for u in result.uvs]
-    )
+    return np.array([np.ptp(min_area_rotation(u)[0], axis=0).max() for u in _texels(result)])
 
 
 @pytest.mark.parametrize("resolution", [0, 512])
@@ -48,12 +50,12 @@ def test_texels_per_unit_is_honoured(resolution):
     uvs, faces, areas = _charts()
     r = pack_charts(uvs, faces, areas, config=PackConfig(resolution=resolution, texels_per_unit=40))
     np.testing.assert_allclose(_density(r, faces, areas), 40, rtol=1e-9)
-    np.testing.assert_allclose(r.scale * r.resolution, 40, rtol=1e-12)
+    np.testing.assert_allclose(r.scale * r.width, 40, rtol=1e-12)
     if resolution:
         assert r.resolution == resolution
     else:  # it follows: at least the charts' area, and the charts fit
         assert np.sqrt(sum(areas)) * 40 < r.resolution <= 2 * np.sqrt(sum(areas)) * 40
-    assert footprint_conflicts(r.uvs, faces, resolution=r.resolution, padding=2) == 0
+    assert footprint_conflicts(r.uvs, faces, resolution=r.size, padding=2) == 0
     # twice the density: twice the texels a side
     r2 = pack_charts(uvs, faces, areas, config=PackConfig(resolution=0, texels_per_unit=80))
     np.testing.assert_allclose(_longest_side(r2), 2 * _longest_side(r), rtol=1e-9)
@@ -71,7 +73,7 @@ def test_max_chart_size_scales_the_larger_charts_down(texels_per_unit):
     free = pack_charts(
         uvs, faces, areas, config=PackConfig(resolution=256, texels_per_unit=texels_per_unit)
     )
-    density = free.scale * free.resolution
+    density = free.scale * free.width
     cfg = PackConfig(resolution=256, texels_per_unit=texels_per_unit, max_chart_size=60)
     r = pack_charts(uvs, faces, areas, config=cfg)
     sides, before = _longest_side(r), _longest_side(free)
@@ -80,7 +82,7 @@ def test_max_chart_size_scales_the_larger_charts_down(texels_per_unit):
     np.testing.assert_allclose(sides[big], 60, rtol=1e-9)  # scaled down to the limit
     np.testing.assert_allclose(sides[~big], before[~big], rtol=1e-9)  # the others as they were
     np.testing.assert_allclose(_density(r, faces, areas)[~big], density, rtol=1e-9)
-    assert footprint_conflicts(r.uvs, faces, resolution=256, padding=2) == 0
+    assert footprint_conflicts(r.uvs, faces, resolution=r.size, padding=2) == 0
 
 
 @pytest.mark.parametrize(

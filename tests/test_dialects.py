@@ -318,7 +318,7 @@ def _fake_atlas(V: np.ndarray, F: np.ndarray) -> SimpleNamespace:
         uv_F=F,
         uv_vertex=np.arange(len(V)),
         chart_of_face=np.zeros(len(F), dtype=np.int64),
-        packing=SimpleNamespace(resolution=64),
+        packing=SimpleNamespace(resolution=64, size=(64, 64)),
         report=lambda: {},
     )
 

@@ -55,7 +55,7 @@ def two_chart_atlas(offset=(0.0, 0.0, 0.0), *, seed: int = 0) -> SimpleNamespace
         uv_F=uv_F,
         uv_vertex=uv_vertex,
         chart_of_face=labels,
-        packing=SimpleNamespace(resolution=64),
+        packing=SimpleNamespace(resolution=64, size=(64, 64)),
         report=lambda: {},
     )
 
@@ -442,7 +442,7 @@ def test_save_atlas_does_not_import_trimesh(tmp_path):
         "import numpy as np\n"
         "from segparam.export import save_atlas\n"
         "atlas = SimpleNamespace(**np.load(sys.argv[1]), report=lambda: {},\n"
-        "                        packing=SimpleNamespace(resolution=64))\n"
+        "                        packing=SimpleNamespace(resolution=64, size=(64, 64)))\n"
         "save_atlas(atlas, sys.argv[2])\n"
         "assert 'trimesh' not in sys.modules, 'trimesh imported'\n"
     )
@@ -455,3 +455,58 @@ def test_save_atlas_does_not_import_trimesh(tmp_path):
     )
     assert result.returncode == 0, result.stderr
     assert (out / "mesh.glb").exists()
+
+
+# ---------------------------------------------------------------------------------------------
+# a trimmed (non-square) texture: every picture and metric at its width x height
+
+
+def test_a_long_sheet_gets_a_trimmed_texture_and_every_file_follows(tmp_path):
+    from segparam.pictures import PictureOptions
+    from segparam.pipeline import PipelineConfig, build_atlas
+    from segparam.quality import distortion
+
+    V, F = tri_grid(24, 6, width=4.0, height=1.0)  # flat, 4 x 1: one chart, no distortion
+    config = PipelineConfig().replace(pack={"resolution": 256}, remesh={"mode": "off"})
+    atlas = build_atlas(V, F, config)
+    W, H = atlas.packing.size
+    assert atlas.n_charts == 1 and W == 256 and H < 128 and H % 4 == 0
+    report = atlas.report()["atlas"]
+    assert (report["width"], report["height"], report["resolution"]) == (W, H, 256)
+    assert report["utilization"] > 0.7  # of the trimmed texture; under 0.3 of the square
+    # distortion on the texture's texels: the flat sheet is mapped without any
+    assert report["l2_stretch"] == pytest.approx(1.0, abs=1e-9)
+    assert report["angle_distortion"] == pytest.approx(1.0, abs=1e-9)
+    d = distortion(atlas.V[atlas.uv_vertex], atlas.uv_F, atlas.texel_uv)
+    assert d["angle_distortion"] == pytest.approx(report["angle_distortion"], abs=1e-12)
+    assert distortion(atlas.V[atlas.uv_vertex], atlas.uv_F, atlas.uv)["angle_distortion"] > 1.5
+    options = PictureOptions(bakes=("curvature",), flat=True)
+    atlas.save(tmp_path, stem="sheet", pictures=options)
+    for name in ("sheet_uv.png", "sheet_curvature.png", "sheet_flatmap.png"):
+        with Image.open(tmp_path / name) as img:
+            assert img.size == (W, H), name
+    with Image.open(tmp_path / "sheet_checker.png") as img:  # its squares square on the model
+        cw, ch = img.size
+        assert cw == export.CHECKER_SIZE and ch == round(export.CHECKER_SIZE * H / W)
+        pixels = np.asarray(img.convert("RGB"))
+    cell = export.CHECKER_SIZE // export.CHECKER_SQUARES
+    dark = pixels[:, :, 2] < 100  # blue: 200, or 70 in a dark square
+    assert dark[0, 0] == dark[cell - 1, cell - 1] != dark[cell, 0] == dark[0, cell]
+    glb = trimesh.load(tmp_path / "sheet.glb", force="mesh", process=False)
+    assert glb.visual.material.baseColorTexture.size == (cw, ch)
+
+
+def test_square_keeps_the_whole_texture(tmp_path, capsys):
+    from segparam.cli import main
+
+    V, F = tri_grid(24, 6, width=4.0, height=1.0)
+    write_obj(tmp_path / "sheet.obj", V, F)
+    common = ["atlas", str(tmp_path / "sheet.obj"), "--resolution", "256", "--no-remesh"]
+    assert main([*common, "-o", str(tmp_path / "trim"), "--quiet"]) == 0
+    assert main([*common, "-o", str(tmp_path / "square"), "--square", "--quiet"]) == 0
+    trimmed = json.loads((tmp_path / "trim" / "report.json").read_text())["atlas"]
+    square = json.loads((tmp_path / "square" / "report.json").read_text())["atlas"]
+    assert (square["width"], square["height"]) == (256, 256) and trimmed["height"] < 128
+    assert trimmed["texels_per_unit"] == pytest.approx(square["texels_per_unit"], rel=1e-12)
+    with Image.open(tmp_path / "square" / "sheet_uv.png") as img:
+        assert img.size == (256, 256)

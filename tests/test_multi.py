@@ -39,7 +39,7 @@ def _chart_pieces(atlases):
 
 
 def _densities(uvs, faces, V_list, F_list):
-    """Per chart: sqrt(uv area / 3-D area)."""
+    """Per chart: sqrt(area in ``uvs``' units / 3-D area)."""
     out = []
     for uv, f, V, F in zip(uvs, faces, V_list, F_list, strict=True):
         out.append(np.sqrt(np.abs(signed_areas(uv, f)).sum() / face_areas(V, F).sum()))
@@ -52,7 +52,7 @@ def test_two_meshes_share_one_texture_without_overlap_at_one_density():
     assert len(multi.atlases) == 2 and multi.packing.resolution == 256
     uvs, faces = _chart_pieces(multi.atlases)
     assert len(uvs) == len(multi.packing.uvs)
-    assert footprint_conflicts(uvs, faces, resolution=256, padding=2) == 0
+    assert footprint_conflicts(uvs, faces, resolution=multi.packing.size, padding=2) == 0
     Vs, Fs = [], []
     for a in multi.atlases:
         np.testing.assert_array_equal(a.uv_vertex[a.uv_F], a.F)
@@ -60,8 +60,9 @@ def test_two_meshes_share_one_texture_without_overlap_at_one_density():
         for c in range(a.n_charts):
             Vs.append(a.V)
             Fs.append(a.F[a.chart_of_face == c])
-    density = _densities(uvs, faces, Vs, Fs)
-    np.testing.assert_allclose(density, multi.packing.scale, rtol=1e-9)  # one texel density
+    texels = np.array(multi.packing.size, dtype=float)
+    density = _densities([u * texels for u in uvs], faces, Vs, Fs)  # texels per unit
+    np.testing.assert_allclose(density, multi.packing.scale * texels[0], rtol=1e-9)
     # the parts add up to the whole
     total = sum(a.packing.utilization for a in multi.atlases)
     assert total == pytest.approx(multi.packing.utilization, rel=1e-12)
@@ -123,10 +124,10 @@ def test_cli_several_inputs_make_one_atlas(tmp_path, capsys):
         Vs.append(mesh.V)
         Fs.append(mesh.F)
     # the meshes' layouts never overlap, and both have the texture's density
-    assert footprint_conflicts(uvs, faces, resolution=256, padding=2) == 0
-    density = _densities(uvs, faces, Vs, Fs)
-    texels = report["texture"]["texels_per_unit"] / 256
-    np.testing.assert_allclose(density, texels, rtol=1e-6)
+    size = (report["texture"]["width"], report["texture"]["height"])
+    assert footprint_conflicts(uvs, faces, resolution=size, padding=2) == 0
+    density = _densities([u * np.array(size, dtype=float) for u in uvs], faces, Vs, Fs)
+    np.testing.assert_allclose(density, report["texture"]["texels_per_unit"], rtol=1e-6)
 
 
 def test_cli_several_inputs_with_texel_density(tmp_path):

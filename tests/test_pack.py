@@ -12,7 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from segparam import raster
+from segparam import pack, raster
 from segparam.errors import ConfigError, InvalidMeshError
 from segparam.pack import (
     PackConfig,
@@ -90,13 +90,16 @@ def mixed_charts(n: int, seed: int) -> tuple[list, list, np.ndarray]:
 # independent conservative rasterization (separating-axis theorem, texel by texel)
 
 
-def touched_texels(uv: np.ndarray, F: np.ndarray, res: int) -> np.ndarray:
-    """(res, res) bool: texels [j, j+1] x [i, i+1] / res that a closed triangle meets."""
-    P = uv * res
+def touched_texels(uv: np.ndarray, F: np.ndarray, res) -> np.ndarray:
+    """(H, W) bool: texels [j, j+1] / W x [i, i+1] / H that a closed triangle meets (``res``: a
+    side, or the texture's (W, H))."""
+    W, H = (res, res) if np.ndim(res) == 0 else res
+    P = uv * np.array([W, H], dtype=float)
     T = P[F]  # (m, 3, 2)
-    out = np.zeros((res, res), dtype=bool)
-    lo = np.clip(np.floor(T.min(axis=1)).astype(int) - 1, 0, res - 1)  # closed: x = i touches i - 1
-    hi = np.clip(np.floor(T.max(axis=1)).astype(int), 0, res - 1)
+    out = np.zeros((H, W), dtype=bool)
+    top = np.array([W - 1, H - 1])
+    lo = np.clip(np.floor(T.min(axis=1)).astype(int) - 1, 0, top)  # closed: x = i touches i - 1
+    hi = np.clip(np.floor(T.max(axis=1)).astype(int), 0, top)
     for t in range(len(F)):  # test helper: clarity over speed
         xs = np.arange(lo[t, 0], hi[t, 0] + 1)
         ys = np.arange(lo[t, 1], hi[t, 1] + 1)
@@ -135,10 +138,11 @@ def chebyshev_dilate(mask: np.ndarray, r: int) -> np.ndarray:
 
 
 def assert_valid_layout(res: PackResult, faces: list) -> None:
-    G, p = res.resolution, res.padding
-    feet = [touched_texels(uv, F, G) for uv, F in zip(res.uvs, faces, strict=True)]
-    border = np.ones((G, G), dtype=bool)
-    border[p : G - p, p : G - p] = False
+    (W, H), p = res.size, res.padding
+    assert min(W, H) <= res.resolution == max(W, H)
+    feet = [touched_texels(uv, F, (W, H)) for uv, F in zip(res.uvs, faces, strict=True)]
+    border = np.ones((H, W), dtype=bool)
+    border[p : H - p, p : W - p] = False
     for i, a in enumerate(feet):
         assert a.any()
         assert not (a & border).any(), f"chart {i} within {p} texels of the border"
@@ -146,7 +150,25 @@ def assert_valid_layout(res: PackResult, faces: list) -> None:
         for j in range(i + 1, len(feet)):
             assert not (grown & feet[j]).any(), f"charts {i} and {j} closer than {p} texels"
     for uv in res.uvs:
-        assert uv.min() >= p / G - 1e-12 and uv.max() <= 1 - p / G + 1e-12
+        low, high = p / np.array([W, H]), 1 - p / np.array([W, H])
+        assert np.all(uv.min(axis=0) >= low - 1e-12) and np.all(uv.max(axis=0) <= high + 1e-12)
+
+
+def in_texels(res: PackResult) -> list:
+    """Per chart, its packed uv in texels of the (possibly trimmed) texture."""
+    return [uv * np.array(res.size, dtype=float) for uv in res.uvs]
+
+
+def texel_transforms(res: PackResult) -> np.ndarray:
+    """The packed charts' affine maps into texels (u times the width, v times the height)."""
+    return res.transforms * np.array(res.size, dtype=float)[None, :, None]
+
+
+def assert_uniform_density(res: PackResult, faces: list, areas) -> None:
+    """Every chart's area in texels is its 3-D area times the one density squared."""
+    pairs = zip(in_texels(res), faces, areas, strict=True)
+    ratio = [area_uv(u, F) / a for u, F, a in pairs]
+    np.testing.assert_allclose(ratio, (res.scale * res.width) ** 2, rtol=1e-9)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -263,31 +285,33 @@ def packed(request, mixed) -> tuple[PackResult, list, np.ndarray]:
 def test_no_overlap_with_padding(packed) -> None:
     res, faces, _ = packed
     assert_valid_layout(res, faces)
-    assert footprint_conflicts(res.uvs, faces, resolution=256, padding=2) == 0
+    assert footprint_conflicts(res.uvs, faces, resolution=res.size, padding=2) == 0
 
 
 def test_texel_density_is_uniform(packed) -> None:
     res, faces, areas = packed
-    ratio = np.array([area_uv(uv, F) for uv, F in zip(res.uvs, faces, strict=True)]) / areas
-    np.testing.assert_allclose(ratio, res.scale**2, rtol=1e-9)
+    assert_uniform_density(res, faces, areas)
 
 
 def test_utilization_matches_recomputation(packed) -> None:
     res, faces, areas = packed
     total = sum(area_uv(uv, F) for uv, F in zip(res.uvs, faces, strict=True))
     assert res.utilization == pytest.approx(total, rel=1e-12)
-    assert res.utilization == pytest.approx(res.scale**2 * areas.sum(), rel=1e-9)
+    texel_area = (res.scale * res.width) ** 2 * areas.sum()
+    assert res.utilization == pytest.approx(texel_area / (res.width * res.height), rel=1e-9)
 
 
 def test_transforms_are_orientation_preserving_similarities(packed, mixed) -> None:
     res, _, _ = packed
     uvs_in = mixed[0]
     assert res.transforms.shape == (len(uvs_in), 2, 3)
-    for A, uv_in, uv_out in zip(res.transforms, uvs_in, res.uvs, strict=True):
+    for A, T, uv_in, uv_out in zip(
+        res.transforms, texel_transforms(res), uvs_in, res.uvs, strict=True
+    ):
         np.testing.assert_allclose(uv_in @ A[:, :2].T + A[:, 2], uv_out, atol=1e-14)
-        L = A[:, :2]
+        L = T[:, :2]  # in texels: a rotation times a uniform scale
         assert np.linalg.det(L) > 0
-        np.testing.assert_allclose(L @ L.T, np.eye(2) * np.linalg.det(L), atol=1e-12)
+        np.testing.assert_allclose(L @ L.T / np.linalg.det(L), np.eye(2), atol=1e-12)
 
 
 def test_charts_come_out_min_area_oriented() -> None:
@@ -337,8 +361,7 @@ def test_angle_steps_keep_the_layout_valid(steps: int) -> None:
     uvs, faces, areas = mixed_charts(10, seed=9)
     res = pack_charts(uvs, faces, areas, config=PackConfig(resolution=160, angle_steps=steps))
     assert_valid_layout(res, faces)
-    ratio = [area_uv(u, F) / a for u, F, a in zip(res.uvs, faces, areas, strict=True)]
-    np.testing.assert_allclose(ratio, res.scale**2, rtol=1e-9)
+    assert_uniform_density(res, faces, areas)
 
 
 def _turns_off(uvs, transforms, period: float) -> np.ndarray:
@@ -368,7 +391,7 @@ def test_round_charts_turn_by_fine_angles_and_rectangles_by_quarter_turns() -> N
         config = PackConfig(resolution=resolution, padding=2, angle_steps=3)
         res = pack_charts(uvs, faces, areas, config=config)
         assert_valid_layout(res, faces)
-        off = _turns_off(uvs, res.transforms, 90)
+        off = _turns_off(uvs, texel_transforms(res), 90)
         assert off[-1] < 1e-6  # the rectangle
         assert np.all(np.isclose(off % 30, 0, atol=1e-6) | np.isclose(off % 30, 30, atol=1e-6))
         fine += int(np.sum(off > 29))
@@ -380,7 +403,7 @@ def test_no_fine_angles_with_one_step_or_without_rotation() -> None:
     configs = [PackConfig(resolution=160, angle_steps=1), PackConfig(resolution=160, rotate=False)]
     for cfg in configs:
         res = pack_charts(uvs, faces, areas, config=cfg)
-        assert np.all(_turns_off(uvs, res.transforms, 90) < 1e-6)
+        assert np.all(_turns_off(uvs, texel_transforms(res), 90) < 1e-6)
 
 
 def test_a_folded_chart_packs_without_overlap() -> None:
@@ -561,8 +584,7 @@ def test_long_thin_chart_and_wildly_different_areas() -> None:
     areas = np.array([0.02, 1.0, 1e-5])
     res = pack_charts(uvs, faces, areas, config=PackConfig(resolution=256, padding=2))
     assert_valid_layout(res, faces)
-    ratio = [area_uv(u, F) / a for u, F, a in zip(res.uvs, faces, areas, strict=True)]
-    np.testing.assert_allclose(ratio, res.scale**2, rtol=1e-9)
+    assert_uniform_density(res, faces, areas)
 
 
 def test_without_rotation_every_chart_keeps_its_minimum_area_frame() -> None:
@@ -573,18 +595,18 @@ def test_without_rotation_every_chart_keeps_its_minimum_area_frame() -> None:
     uvs, faces, areas = mixed_charts(8, seed=1)
     res = pack_charts(uvs, faces, areas, config=PackConfig(resolution=128, rotate=False))
     assert_valid_layout(res, faces)
-    A = res.transforms[:, :, :2]
+    A = texel_transforms(res)[:, :, :2]
     det = np.linalg.det(A)
     assert np.all(det > 0)  # no mirror
-    # a rotation times a uniform scale: A A^T / det(A) is the identity
+    # in texels, a rotation times a uniform scale: A A^T / det(A) is the identity
     np.testing.assert_allclose(
         A @ A.transpose(0, 2, 1) / det[:, None, None], [np.eye(2)] * 8, atol=1e-12
     )
-    assert np.all(_turns_off(uvs, res.transforms, 360) < 1e-6)
-    width = np.array([np.ptp(uv, axis=0) for uv in res.uvs])
+    assert np.all(_turns_off(uvs, texel_transforms(res), 360) < 1e-6)
+    width = np.array([np.ptp(uv, axis=0) for uv in in_texels(res)])
     assert np.all(width[:, 0] >= width[:, 1] * (1 - 1e-9))
     quarter = PackConfig(resolution=128, angle_steps=1)
-    off = _turns_off(uvs, pack_charts(uvs, faces, areas, config=quarter).transforms, 360)
+    off = _turns_off(uvs, texel_transforms(pack_charts(uvs, faces, areas, config=quarter)), 360)
     assert np.isclose(off, 90).any() and np.isclose(off, 180).any()
 
 
@@ -673,8 +695,7 @@ def test_random_charts_never_overlap(charts, padding, method) -> None:
         uvs, faces, areas, config=PackConfig(resolution=96, padding=padding, method=method)
     )
     assert_valid_layout(res, faces)
-    ratio = [area_uv(u, F) / a for u, F, a in zip(res.uvs, faces, areas, strict=True)]
-    np.testing.assert_allclose(ratio, res.scale**2, rtol=1e-9)
+    assert_uniform_density(res, faces, areas)
 
 
 def test_outlines_are_the_boundary_edges_and_refuse_bad_edges() -> None:
@@ -762,3 +783,65 @@ def test_round_charts_pack_as_with_every_angle(monkeypatch) -> None:
     slow = pack_charts(uvs, faces, areas, config=PackConfig(resolution=512))
     assert_valid_layout(fast, faces)
     assert fast.utilization >= slow.utilization - 0.005
+
+
+# ---------------------------------------------------------------------------------------------
+# trimming (PackConfig.trim): the same layout, in a texture cut to the rows it uses
+
+
+def test_a_long_chart_gets_a_trimmed_texture_with_the_same_layout() -> None:
+    # a 4:1 strip binds the scale by its length: it fills the width and a quarter of the height
+    uv, F = grid(8, 2)
+    square = pack_charts([uv], [F], [1.0], config=PackConfig(resolution=256, trim=False))
+    trimmed = pack_charts([uv], [F], [1.0], config=PackConfig(resolution=256))
+    assert square.size == (256, 256)
+    (W, H), p = trimmed.size, trimmed.padding
+    assert W == 256 and H % pack.TRIM_MULTIPLE == 0 and H <= 256 * (1 - pack.TRIM_LEAST)
+    assert_valid_layout(trimmed, [F])  # padding kept to the new border too
+    assert footprint_conflicts(trimmed.uvs, [F], resolution=(W, H), padding=p) == 0
+    # the same layout in texels, the same density; the texture is smaller by H / 256
+    np.testing.assert_allclose(in_texels(trimmed)[0], in_texels(square)[0], atol=1e-9)
+    assert trimmed.scale * W == pytest.approx(square.scale * 256, rel=1e-12)
+    assert trimmed.utilization == pytest.approx(square.utilization * 256 / H, rel=1e-9)
+    # the strip's texels reach within padding + TRIM_MULTIPLE of the top, not closer than p
+    top = in_texels(trimmed)[0][:, 1].max()
+    assert H - pack.TRIM_MULTIPLE - p <= top < H - p
+
+
+def test_a_layout_that_fills_its_square_is_not_trimmed() -> None:
+    uvs, faces, areas = mixed_charts(30, seed=0)
+    plain = pack_charts(uvs, faces, areas, config=PackConfig(resolution=192, trim=False))
+    trimmed = pack_charts(uvs, faces, areas, config=PackConfig(resolution=192))
+    assert trimmed.size == (192, 192)
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(plain.uvs, trimmed.uvs, strict=True))
+    assert plain.transforms.tobytes() == trimmed.transforms.tobytes()
+
+
+@pytest.mark.parametrize(
+    ("top", "size"),
+    [
+        ((100.0, 300.0), (104, 304)),  # 100 + 1 + 2 = 103 columns, rounded up to 104
+        ((99.5, 299.999), (104, 304)),  # the texel under a top of 99.5 is column 99
+        ((1019.5, 500.0), (1024, 504)),  # a top on a texel line touches that texel: 501 + 2
+        ((700.0, 890.0), (704, 896)),  # 893 -> 896 rows: an eighth empty, trimmed
+        ((700.0, 900.0), (704, 1024)),  # 903 -> 904 rows leave less than an eighth empty
+    ],
+)
+def test_trimmed_sides_keep_the_padding_and_round_to_blocks(top, size) -> None:
+    assert pack._trimmed(np.array(top), 1024, 2) == size
+
+
+def test_trimmed_layouts_stay_valid() -> None:
+    # long and small charts of random shapes: whatever side is trimmed, no footprint comes
+    # within the padding of another or of the texture's border
+    rng = np.random.default_rng(3)
+    for _ in range(6):
+        uvs, faces = [], []
+        for _ in range(int(rng.integers(1, 5))):
+            uv, F = grid(int(rng.integers(4, 12)), int(rng.integers(1, 3)))
+            uvs.append(rotate(uv * rng.uniform(0.5, 2), rng.uniform(0, np.pi)))
+            faces.append(F)
+        areas = [area_uv(u, F) for u, F in zip(uvs, faces, strict=True)]
+        res = pack_charts(uvs, faces, areas, config=PackConfig(resolution=128, padding=2))
+        assert_valid_layout(res, faces)
+        assert_uniform_density(res, faces, areas)

@@ -55,7 +55,7 @@ def check_atlas(atlas):
         rows, local = np.unique(uvF[atlas.chart_of_face == k].ravel(), return_inverse=True)
         faces.append(local.reshape(-1, 3))
     # Charts never share a texel at the atlas resolution (a rasterized overlap test).
-    assert footprint_conflicts(uvs, faces, resolution=atlas.packing.resolution, padding=0) == 0
+    assert footprint_conflicts(uvs, faces, resolution=atlas.packing.size, padding=0) == 0
     for k, c in enumerate(atlas.charts.charts):
         q = chart_quality(V[c.vertices], c.local_F, uvs[k])
         assert q.bijective
@@ -63,7 +63,7 @@ def check_atlas(atlas):
     a = report["atlas"]
     assert a["charts"] == atlas.n_charts and a["flipped_triangles"] == 0
     assert a["utilization"] == pytest.approx(area.sum(), rel=1e-9)
-    d = distortion(V[atlas.uv_vertex], uvF, uv)
+    d = distortion(V[atlas.uv_vertex], uvF, uv * np.array(atlas.packing.size))  # in texels
     assert a["angle_distortion"] == pytest.approx(d["angle_distortion"])
     assert a["l2_stretch"] == pytest.approx(d["l2_stretch"])
     per_chart_faces = sum(r["faces"] for r in report["charts"])

@@ -180,7 +180,7 @@ def test_cube_six_planar_charts_without_stretch(refine):
         m = m.subdivide()
     V, F = np.asarray(m.vertices), np.asarray(m.faces)
     a = build_atlas(V, F, FAST.replace(split={"refine": refine}), seed=0)
-    d = distortion(a.V[a.uv_vertex], a.uv_F, a.uv)
+    d = distortion(a.V[a.uv_vertex], a.uv_F, a.texel_uv)
     assert a.n_charts == 6
     assert d["l2_stretch"] == pytest.approx(1.0, abs=1e-9)
     assert d["angle_distortion"] == pytest.approx(1.0, abs=1e-9)
@@ -196,7 +196,7 @@ def test_open_cylinder_and_cone_are_flattened_without_stretch(r_top):
     +-2 pi.)"""
     V, F = tube(r_top=r_top)
     a = build_atlas(V, F, FAST, seed=0)
-    d = distortion(a.V[a.uv_vertex], a.uv_F, a.uv)
+    d = distortion(a.V[a.uv_vertex], a.uv_F, a.texel_uv)
     assert a.n_charts == 1 and a.charts.charts[0].method == "developable"
     assert d["l2_stretch"] == pytest.approx(1.0, abs=1e-9)
     assert d["angle_distortion"] == pytest.approx(1.0, abs=1e-9)
@@ -208,7 +208,7 @@ def test_sphere_within_the_lambert_bound():
     m = trimesh.creation.icosphere(3)
     V, F = np.asarray(m.vertices), np.asarray(m.faces)
     a = build_atlas(V, F, FAST, seed=0)
-    d = distortion(a.V[a.uv_vertex], a.uv_F, a.uv)
+    d = distortion(a.V[a.uv_vertex], a.uv_F, a.texel_uv)
     assert all(c.quality.bijective for c in a.charts.charts)
     assert d["l2_stretch"] < LAMBERT_HEMISPHERE_L2
     assert d["angle_distortion"] < LAMBERT_HEMISPHERE_ANGLE
@@ -237,7 +237,7 @@ def test_the_stretch_target_trades_charts_for_stretch():
     for target in (None, 1.02, 1.005):  # the target alone (no bisections for the gain)
         split = {"max_stretch": target, "min_split_gain": None}
         a = build_atlas(V, F, FAST.replace(split=split), seed=0)
-        d = distortion(a.V[a.uv_vertex], a.uv_F, a.uv)
+        d = distortion(a.V[a.uv_vertex], a.uv_F, a.texel_uv)
         assert all(c.quality.bijective for c in a.charts.charts)
         out.append((a.n_charts, d["l2_stretch"]))
         if target is not None:  # every chart big enough to be split meets the target
@@ -259,7 +259,7 @@ def test_a_small_closed_part_is_split_to_the_stretch_target():
     assert 3 <= a.n_charts <= 6
     big = [c for c in a.charts.charts if len(c.faces) >= STRETCH_MIN_FACES]
     assert big and all(c.quality.l2_stretch <= 1.02 for c in big)
-    d = distortion(a.V[a.uv_vertex], a.uv_F, a.uv)
+    d = distortion(a.V[a.uv_vertex], a.uv_F, a.texel_uv)
     assert d["l2_stretch"] < 1.01 and d["angle_distortion"] < 1.12
 
 
@@ -341,7 +341,7 @@ def test_small_spheres_trade_some_angle_for_less_stretch(monkeypatch):
         a = build_atlas(V, F, FAST, seed=0)
         assert all(c.quality.bijective for c in a.charts.charts)
         assert max(len(c.faces) for c in a.charts.charts) < refine.SMALL_CHART_ANGLE_FACES
-        d = distortion(a.V[a.uv_vertex], a.uv_F, a.uv)
+        d = distortion(a.V[a.uv_vertex], a.uv_F, a.texel_uv)
         out.append((d["l2_stretch"], d["angle_distortion"]))
     (l2_small, angle_small), (l2_full, angle_full) = out
     assert l2_small < l2_full and angle_small > angle_full

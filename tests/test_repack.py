@@ -88,9 +88,10 @@ def test_keep_preserves_island_shapes_up_to_rotation_and_one_scale():
     np.testing.assert_array_equal(r.uv_vertex[r.uv_F], F)
     assert r.uv.min() >= 0 and r.uv.max() <= 1
     scales = []
+    texels = r.uv * np.array(r.packing.size, dtype=float)  # similar in texels
     for i in range(3):
         faces = np.flatnonzero(islands == i)
-        a, residual = _similarity(uv[F[faces]].reshape(-1, 2), r.uv[r.uv_F[faces]].reshape(-1, 2))
+        a, residual = _similarity(uv[F[faces]].reshape(-1, 2), texels[r.uv_F[faces]].reshape(-1, 2))
         assert residual < 1e-9
         scales.append(abs(a))
         # no mirror added: every face keeps its winding (the mirrored island stays mirrored)
@@ -98,7 +99,7 @@ def test_keep_preserves_island_shapes_up_to_rotation_and_one_scale():
         assert np.array_equal(np.sign(signed_areas(r.uv, r.uv_F[faces])), before)
     np.testing.assert_allclose(scales, scales[0], rtol=1e-9)
     faces = [r.uv_F[r.chart_of_face == c] for c in range(3)]
-    assert footprint_conflicts([r.uv] * 3, faces, resolution=256, padding=2) == 0
+    assert footprint_conflicts([r.uv] * 3, faces, resolution=r.packing.size, padding=2) == 0
 
 
 def test_keep_from_a_trimesh_with_uv():
@@ -152,13 +153,14 @@ def test_repair_recharts_only_the_broken_islands_and_says_why():
     assert report["islands"][4]["reasons"] == [REASON_OUTSIDE]
     # the kept island keeps its shape; the re-charted ones are bijective charts
     faces = np.flatnonzero(islands == 0)
-    _, residual = _similarity(uv[F[faces]].reshape(-1, 2), r.uv[r.uv_F[faces]].reshape(-1, 2))
+    texels = r.uv * np.array(r.packing.size, dtype=float)  # similar in texels
+    _, residual = _similarity(uv[F[faces]].reshape(-1, 2), texels[r.uv_F[faces]].reshape(-1, 2))
     assert residual < 1e-9
     assert all(c.quality.bijective for c in r.recharted.charts)
     np.testing.assert_array_equal(r.uv_vertex[r.uv_F], F)
     n = int(r.chart_of_face.max()) + 1
     faces = [r.uv_F[r.chart_of_face == c] for c in range(n)]
-    assert footprint_conflicts([r.uv] * n, faces, resolution=256, padding=2) == 0
+    assert footprint_conflicts([r.uv] * n, faces, resolution=r.packing.size, padding=2) == 0
     assert (signed_areas(r.uv, r.uv_F[r.chart_of_face > 0]) > 0).all()
 
 

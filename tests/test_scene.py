@@ -111,16 +111,16 @@ def test_cli_scene_makes_one_texture_and_the_scene_back_with_its_nodes(tmp_path)
         np.testing.assert_allclose(V.max(axis=0), hi, atol=1e-5)
         uvs.append(np.asarray(mesh.visual.uv))
         faces.append(np.asarray(mesh.faces))
-    assert footprint_conflicts(uvs, faces, resolution=256, padding=2) == 0  # no overlap
     report = json.loads((out / "report.json").read_text())
+    size = np.array([report["texture"]["width"], report["texture"]["height"]])
+    assert footprint_conflicts(uvs, faces, resolution=tuple(size), padding=2) == 0  # no overlap
     assert [m["name"] for m in report["meshes"]] == ["plate", "tube"]
-    texels = report["texture"]["texels_per_unit"] / 256
     density = []
     for name in ("plate", "tube"):  # one texel density, read back from the OBJs
         m = load_mesh(out / f"{name}.obj", uvs=True)
-        uv_area = np.abs(signed_areas(m.uv, m.uv_F)).sum()
-        density.append(np.sqrt(uv_area / face_areas(m.V, m.F).sum()))
-    np.testing.assert_allclose(density, texels, rtol=1e-6)
+        texel_area = np.abs(signed_areas(m.uv * size, m.uv_F)).sum()
+        density.append(np.sqrt(texel_area / face_areas(m.V, m.F).sum()))
+    np.testing.assert_allclose(density, report["texture"]["texels_per_unit"], rtol=1e-6)
 
 
 def test_cli_single_mesh_glb_behaves_as_before(tmp_path):
@@ -167,13 +167,15 @@ def test_several_meshes_get_the_pictures_of_the_whole_set(tmp_path):
         "atlas_curvature.png",
         "atlas_normals.png",
     }
-    from segparam.export import _checker_pixels
+    from segparam.export import _checker_pixels, checker_size
 
-    expected = render_preview(merged.V, merged.F, merged.uv, merged.uv_F, _checker_pixels(1024, 16))
+    checker = _checker_pixels(checker_size(multi.packing.size), 16)  # square on the texture
+    expected = render_preview(merged.V, merged.F, merged.uv, merged.uv_F, checker)
     preview = np.asarray(Image.open(out / "atlas_preview.png").convert("RGB"))
     np.testing.assert_array_equal(preview, expected)  # both meshes, one picture
     with Image.open(out / "atlas_normals.png") as img:
-        assert img.size == (128, 128)  # one baked texture at the shared resolution
+        assert img.size == multi.packing.size  # one baked texture: the shared texture's size
+    assert max(multi.packing.size) == 128
     html = (out / "atlas.html").read_text()
     assert "curvature" in html and "normals" in html
     report = json.loads((out / "report.json").read_text())
