@@ -59,6 +59,8 @@ SUMMARY_FIELDS = (
     "seconds",
     "charts",
     "utilization",
+    "width",
+    "height",
     "angle_distortion",
     "l2_stretch",
     "reason",
@@ -359,6 +361,8 @@ def process_one(
             "seconds": round(time.perf_counter() - t0, 3),
             "charts": report["charts"],
             "utilization": report["utilization"],
+            "width": report["width"],
+            "height": report["height"],
             "angle_distortion": report["angle_distortion"],
             "l2_stretch": report["l2_stretch"],
         }

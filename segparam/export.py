@@ -342,7 +342,8 @@ def save_atlas(
 ):
     """Write an atlas into ``outdir``: ``<stem>.obj/.mtl/_checker.png``, ``<stem>.glb``,
     ``<stem>_uv.png``, the pictures of ``pictures`` (:class:`segparam.pictures.PictureOptions`;
-    default ``<stem>_preview.png`` and ``<stem>.html``) and ``report.json``.
+    default ``<stem>_preview.png`` and ``<stem>.html``) and ``report.json``. The uv picture is
+    the texture's size (``atlas.packing.size``), or ``size`` pixels wide at its aspect.
 
     The folder is checked first (:func:`check_output_folder`); a stem too long for the file
     system is shortened (:func:`atlas_stem`). Every file is then written into a staging folder

@@ -106,6 +106,8 @@ def test_batch_makes_every_atlas_and_records_the_failure(first_run, collection):
         report = json.loads((outdir / stem / "report.json").read_text())
         assert report["settings"]["pack"]["resolution"] == 256
         assert report["atlas"]["charts"] == int(row["charts"])
+        size = (report["atlas"]["width"], report["atlas"]["height"])
+        assert (int(row["width"]), int(row["height"])) == size and max(size) == 256
     assert not (outdir / "broken").exists()
 
 
