@@ -494,6 +494,10 @@ def test_a_long_sheet_gets_a_trimmed_texture_and_every_file_follows(tmp_path):
     assert dark[0, 0] == dark[cell - 1, cell - 1] != dark[cell, 0] == dark[0, cell]
     glb = trimesh.load(tmp_path / "sheet.glb", force="mesh", process=False)
     assert glb.visual.material.baseColorTexture.size == (cw, ch)
+    import nibabel as nib  # the flat surface keeps the texture's proportions
+
+    points = nib.load(tmp_path / "sheet_flat.gii").darrays[0].data
+    np.testing.assert_allclose(points[:, :2], atlas.uv * [1, H / W], atol=1e-6)
 
 
 def test_square_keeps_the_whole_texture(tmp_path, capsys):
