@@ -803,6 +803,7 @@ def build_parser() -> argparse.ArgumentParser:
         _cmd_pack,
         [
             ("--resolution", {"type": RESOLUTION}),
+            ("--square", {"action": "store_true", "help": "always a square texture"}),
             ("--padding", {"type": PADDING}),
             ("--texels-per-unit", {"type": TEXELS_PER_UNIT, "metavar": "X"}),
             ("--max-chart-size", {"type": MAX_CHART_SIZE, "metavar": "N"}),

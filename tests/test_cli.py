@@ -127,6 +127,12 @@ def test_stage_commands_chain_and_match_the_atlas_command(grid_obj, tmp_path):
     assert (d / "staged" / "p_uv.png").read_bytes() == (
         d / "direct" / f"{grid_obj.stem}_uv.png"
     ).read_bytes()
+    # --square on the stage command too: the whole square, whatever the layout uses
+    args = ["pack", str(d / "p.npz"), "-o", str(d / "square"), "--resolution", "256", "--square"]
+    assert main([*args, "--quiet"]) == 0
+    square = json.loads((d / "square" / "report.json").read_text())["atlas"]
+    assert (square["width"], square["height"]) == (256, 256)
+    assert square["texels_per_unit"] == pytest.approx(staged["texels_per_unit"], rel=1e-12)
 
 
 def test_stage_command_rejects_wrong_artifact(grid_obj, tmp_path, capsys):
