@@ -239,7 +239,7 @@ def checker_size(texture: tuple[int, int]) -> tuple[int, int]:
     return CHECKER_SIZE, max(1, int(round(CHECKER_SIZE * height / width)))
 
 
-def checker_image(size: int | tuple[int, int] = 1024, squares: int = 16):
+def checker_image(size: int | tuple[int, int] = CHECKER_SIZE, squares: int = CHECKER_SQUARES):
     """A checkerboard texture with a colour ramp (so flips and rotations show), PIL image;
     ``size`` is its side or its (width, height), and ``squares`` how many squares span its
     width."""
@@ -272,7 +272,9 @@ def _checker_pixels(size: int | tuple[int, int], squares: int) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=4)
-def _checker_png(size: tuple[int, int] = (CHECKER_SIZE, CHECKER_SIZE), squares: int = 16) -> bytes:
+def _checker_png(
+    size: tuple[int, int] = (CHECKER_SIZE, CHECKER_SIZE), squares: int = CHECKER_SQUARES
+) -> bytes:
     """:func:`checker_image` as PNG bytes, made once per size (the atlas writes it twice: the
     ``_checker.png`` file and the texture inside the GLB)."""
     return _png_bytes(_checker_pixels(size, squares))

@@ -261,7 +261,8 @@ def render_preview(
     uv, face_uv : (k, 2) float, (m, 3) int ndarrays
         Texture coordinates (origin bottom-left, as in OBJ) and the uv row of each face corner.
     texture : (h, w, 3) uint8 ndarray, optional
-        In picture order (row 0 is v = 1); default the atlas's checker (1024 px).
+        In picture order (row 0 is v = 1); default the square checker (1024 px; an atlas on a
+        trimmed texture passes the checker of its size, ``export.checker_size``).
     seams : bool or (e, 2) int ndarray
         True: draw :func:`seam_edges`; False: none; an array: these mesh edges.
     views : sequence of (azimuth, elevation) degrees
@@ -279,9 +280,9 @@ def render_preview(
     F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
     face_uv = np.asarray(face_uv, dtype=np.int64).reshape(-1, 3)
     if texture is None:
-        from .export import _checker_pixels
+        from .export import CHECKER_SIZE, CHECKER_SQUARES, _checker_pixels
 
-        texture = _checker_pixels(1024, 16)
+        texture = _checker_pixels(CHECKER_SIZE, CHECKER_SQUARES)
     if seams is True:
         seams = seam_edges(F, face_uv)
     elif seams is False:
