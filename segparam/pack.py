@@ -189,7 +189,8 @@ class PackConfig:
     Parameters
     ----------
     resolution : int
-        Texels per side of the square texture the atlas is packed for.
+        Texels per side of the square the atlas is packed for (the texture, unless `trim` cuts
+        it to the rows or columns the layout uses).
     padding : int
         Empty texels kept between the footprints of any two charts and between every footprint
         and the border of the texture.
