@@ -68,7 +68,8 @@ scan of 166,259 faces in 22 pieces; xatlas takes about two minutes on it); ``--h
 
 For each mesh and tool: wall seconds (the minimum over ``--repeat`` runs), charts, flipped
 triangles, mirrored charts, overlap (texels shared by two charts, ``footprint_conflicts`` at 1024
-with padding 0, on the tool's own texture), utilization (uv triangle area over the unit square:
+with padding 0, on the tool's own texture), texture (its width x height in texels), utilization
+(uv triangle area over the unit square:
 the share of the tool's own texture its charts cover; segparam's texture is 1024 x 1024 unless
 trimmed, ``PackConfig.trim``, and xatlas's is its atlas' ``width x height``), L2 / Linf stretch
 and angle distortion (``segparam.quality.distortion`` on the uvs in texels of that texture),
@@ -530,6 +531,7 @@ COLS = (
     ("flipped", "flip", "5d"),
     ("mirrored_charts", "mirr", "5d"),
     ("overlap_texels", "overlap", "7d"),
+    ("texture_text", "texture", "9s"),
     ("utilization", "util", "6.3f"),
     ("l2_stretch", "L2", "6.3f"),
     ("linf_stretch", "Linf", "8.2f"),
@@ -552,6 +554,8 @@ def show_row(r: dict) -> None:
     cells = []
     for key, _, fmt in COLS:
         v = r.get(key)
+        if key == "texture_text" and r.get("texture"):  # the tool's own texture, width x height
+            v = "{:>9s}".format("{}x{}".format(*r["texture"]))
         width = fmt[:-1].split(".")[0]
         cells.append(f"{'-':>{width}s}" if v is None else format(v, fmt))
     print(f"{r['mesh']:{NAME_W}s} {r['faces']:7d} {r['tool']:14s} " + " ".join(cells), flush=True)
