@@ -16,6 +16,10 @@ Chart sets are generated in code:
     their xatlas uvs; xatlas's own packing of the same charts at the same resolution and padding
     is reported next to ours (utilization = uv triangle area over the square, for all rows).
 
+Every set is packed into the whole square (``PackConfig(trim=False)``): this measures the
+layout the packer finds, as in earlier sessions' tables; the pipeline's default cuts the texture
+to the rows the layout uses when an eighth of the side or more would be empty.
+
 Usage::
 
     python benchmarks/bench_pack.py [--out benchmarks/results/pack.json] [--resolutions 512 1024]
@@ -230,7 +234,9 @@ def xatlas_charts(V: np.ndarray, F: np.ndarray, resolution: int, padding: int):
 def run_one(name, uvs, faces, areas, method, resolution, padding, verify):
     """Pack one set. `method` "raster-rest" / "raster-holes" is the raster packer with that one
     placement rule only (the packer before the "rest" rule was "raster-holes")."""
-    cfg = PackConfig(resolution=resolution, padding=padding, method=method.split("-")[0])
+    cfg = PackConfig(
+        resolution=resolution, padding=padding, method=method.split("-")[0], trim=False
+    )
     rules = pack_module._RULE_ORDER
     if "-" in method:
         pack_module._RULE_ORDER = (method.split("-")[1],)
