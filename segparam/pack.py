@@ -219,7 +219,7 @@ class PackConfig:
     trim : bool
         Cut the texture to the rows (columns) the layout uses when at least `TRIM_LEAST` of its
         side would be empty, rounded up to a multiple of `TRIM_MULTIPLE` texels (default True):
-        a long chart (a sheet, a pipe's side) then gets a 1024 x 576 texture rather than a
+        a long chart (a sheet, a pipe's side) then gets a 1024 x 572 texture rather than a
         square it fills half of; the layout and the texel density are the same either way.
         False: always the square.
 
@@ -319,6 +319,17 @@ class PackResult:
     def size(self) -> tuple[int, int]:
         """The texture's ``(width, height)`` in texels."""
         return (self.width, self.height)
+
+    @property
+    def texels_per_unit(self) -> float:
+        """Texels per unit of 3-D length, the same along u and v."""
+        return self.scale * self.width
+
+    def isotropic(self, uv: np.ndarray) -> np.ndarray:
+        """``uv`` with v times ``height / width``: texels of one size along u and v, u still
+        over [0, 1] (``uv`` itself on a square texture). Lengths and angles there are the
+        texture's: distortion is measured, and the flat GIfTI surface laid out, on these."""
+        return uv * np.array([1.0, self.height / self.width])
 
 
 @dataclass(frozen=True)

@@ -208,8 +208,7 @@ def make_pictures(
             if b.scalar is not None:
                 data[b.name] = b.scalar[atlas.uv_vertex]
         # the flat surface in the texture's proportions (u over [0, 1], v over height / width)
-        width, height = atlas.packing.size
-        flat_uv = atlas.uv * np.array([1.0, height / width])
+        flat_uv = atlas.packing.isotropic(atlas.uv)
         img = flat_gifti(flat_uv, atlas.uv_F, data, vertex_of_uv=atlas.uv_vertex)
         files[names["flat"]] = img.to_xml()
         files[names["flat_data"]] = data_gifti(data).to_xml()

@@ -334,11 +334,6 @@ def _cut_untried(charts: ChartSet) -> int | None:
     return None if charts.cut_untried is None else int(charts.cut_untried.sum())
 
 
-def _texel_aspect(packing: PackResult) -> np.ndarray:
-    """``[1, height / width]``: uv times this has texels of one size along u and v."""
-    return np.array([1.0, packing.height / packing.width])
-
-
 def build_report(atlas: Atlas) -> dict[str, Any]:
     """Per-chart and global figures of an atlas (see the README's "Outputs")."""
     # Figures are computed in the unit frame (scale-free ones as they are, areas and lengths
@@ -410,11 +405,10 @@ def build_report(atlas: Atlas) -> dict[str, Any]:
             "width": atlas.packing.width,
             "height": atlas.packing.height,
             "padding": atlas.packing.padding,
-            "texels_per_unit": atlas.packing.scale * atlas.packing.width,
+            "texels_per_unit": atlas.packing.texels_per_unit,
             "seam_length_over_sqrt_area": atlas.seam_length() / np.sqrt(total_area),
-            # on uv with texels of one size in u and v (v stretched by height / width; the same
-            # numbers as texels, which the distortion's scale does not change)
-            **distortion(V[atlas.uv_vertex], atlas.uv_F, atlas.uv * _texel_aspect(atlas.packing)),
+            # on texels of one size in u and v (the distortion's scale does not matter)
+            **distortion(V[atlas.uv_vertex], atlas.uv_F, atlas.packing.isotropic(atlas.uv)),
         },
         "charts": charts,
     }
@@ -511,7 +505,7 @@ class MultiAtlas:
                     "height": packing.height,
                     "padding": packing.padding,
                     "utilization": packing.utilization,
-                    "texels_per_unit": packing.scale * packing.width,
+                    "texels_per_unit": packing.texels_per_unit,
                 },
                 "meshes": [
                     {"name": name, **atlas.report()}

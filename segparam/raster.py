@@ -378,7 +378,7 @@ def footprint_conflicts(
     """
     W, H = texture_size(resolution)
     p = int(padding)
-    G = np.array([W, H], dtype=np.float64)
+    texels = np.array([W, H], dtype=np.float64)
     # a canvas with a margin, so that footprints past the border are still seen
     m = p + 2
     size = (H + 2 * m, W + 2 * m)
@@ -386,9 +386,9 @@ def footprint_conflicts(
     windows = []
     bad = 0
     for uv, F in zip(uvs, faces, strict=True):  # loop over charts
-        P = np.asarray(uv, dtype=np.float64) * G
+        P = np.asarray(uv, dtype=np.float64) * texels
         F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
-        outside = (P < 2 - m) | (P > G + m - 2)
+        outside = (P < 2 - m) | (P > texels + m - 2)
         if np.any(outside):  # far outside the texture: count every vertex, skip the raster
             bad += int(np.count_nonzero(outside.any(axis=1)))
             windows.append(None)

@@ -140,7 +140,7 @@ class RepackResult:
             "width": self.packing.width,
             "height": self.packing.height,
             "padding": self.packing.padding,
-            "texels_per_unit": self.packing.scale * self.packing.width,
+            "texels_per_unit": self.packing.texels_per_unit,
         }
 
     def save(self, outdir: Any, *, stem: str = "mesh") -> list:

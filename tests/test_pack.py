@@ -93,7 +93,7 @@ def mixed_charts(n: int, seed: int) -> tuple[list, list, np.ndarray]:
 def touched_texels(uv: np.ndarray, F: np.ndarray, res) -> np.ndarray:
     """(H, W) bool: texels [j, j+1] / W x [i, i+1] / H that a closed triangle meets (``res``: a
     side, or the texture's (W, H))."""
-    W, H = (res, res) if np.ndim(res) == 0 else res
+    W, H = raster.texture_size(res)
     P = uv * np.array([W, H], dtype=float)
     T = P[F]  # (m, 3, 2)
     out = np.zeros((H, W), dtype=bool)
