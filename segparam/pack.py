@@ -1066,7 +1066,7 @@ def _pack_at_density(
     unlimited = None
     if s == 0:  # the density of the search, before the limit
         unlimited = pack_charts(uvs, faces, areas3d, config=replace(cfg, max_chart_size=0))
-        s = unlimited.scale * cfg.resolution
+        s = unlimited.texels_per_unit
     charts = _limited(uvs, faces, areas3d, s, cfg.max_chart_size)
     if unlimited is not None and charts is None:
         return unlimited  # no chart above the limit: the search's own layout

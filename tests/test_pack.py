@@ -139,7 +139,9 @@ def chebyshev_dilate(mask: np.ndarray, r: int) -> np.ndarray:
 
 def assert_valid_layout(res: PackResult, faces: list) -> None:
     (W, H), p = res.size, res.padding
-    assert min(W, H) <= res.resolution == max(W, H)
+    # each side is the square's, or trimmed to whole blocks (both can be, at a fixed density)
+    for side in (W, H):
+        assert side == res.resolution or (side < res.resolution and side % pack.TRIM_MULTIPLE == 0)
     feet = [touched_texels(uv, F, (W, H)) for uv, F in zip(res.uvs, faces, strict=True)]
     border = np.ones((H, W), dtype=bool)
     border[p : H - p, p : W - p] = False
@@ -845,3 +847,23 @@ def test_trimmed_layouts_stay_valid() -> None:
         res = pack_charts(uvs, faces, areas, config=PackConfig(resolution=128, padding=2))
         assert_valid_layout(res, faces)
         assert_uniform_density(res, faces, areas)
+
+
+def test_max_chart_size_keeps_the_density_of_a_trimmed_search() -> None:
+    # a 9:1 strip and a square: the search stands the strip up and leaves columns empty, so its
+    # texture is trimmed in width; the limited packing must keep the search's texels per unit
+    # (not its uv scale times the resolution) for the chart under the limit
+    strip, Fs = grid(1, 9)
+    square, Fq = grid(3, 3)
+    uvs, faces = [rotate(strip * 1.266, 1.71), rotate(square * 1.905, 1.01)], [Fs, Fq]
+    areas = [area_uv(u, F) for u, F in zip(uvs, faces, strict=True)]
+    free = pack_charts(uvs, faces, areas, config=PackConfig(resolution=128))
+    assert free.width < 128  # the premise: the search's texture is trimmed in width
+    sides = np.array([np.ptp(min_area_rotation(u)[0], axis=0).max() for u in in_texels(free)])
+    limit = int(0.7 * sides.max())
+    assert sides[1] < limit < sides[0]
+    res = pack_charts(uvs, faces, areas, config=PackConfig(resolution=128, max_chart_size=limit))
+    assert_valid_layout(res, faces)
+    assert res.texels_per_unit == pytest.approx(free.texels_per_unit, rel=1e-9)
+    square_area = area_uv(in_texels(res)[1], Fq)
+    assert np.sqrt(square_area / areas[1]) == pytest.approx(free.texels_per_unit, rel=1e-9)
