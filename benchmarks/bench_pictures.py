@@ -80,7 +80,7 @@ def _pictures(atlas, repeat: int, folder: Path) -> dict[str, float]:
         "curvature": _best(lambda: bake_named(atlas, "curvature"), repeat),
         "flatmap": _best(
             lambda: render_flatmap(
-                atlas.V, atlas.F, atlas.uv, atlas.uv_F, resolution=atlas.packing.resolution
+                atlas.V, atlas.F, atlas.uv, atlas.uv_F, resolution=atlas.packing.size
             ),
             repeat,
         ),
